@@ -216,3 +216,37 @@ def replay(vessel: Vessel, time: np.ndarray, delta: np.ndarray, n: np.ndarray, s
 
     P = vessel.params if P is None else P
     return run(vessel, P, np.asarray(state0, float), dt, nsteps, cmd, nprop, open_loop_ctrl(), substeps)
+
+
+@lru_cache(maxsize=None)
+def _accel_kernel(kind_name: str):
+    from numba import njit
+
+    accel = get_kind(kind_name).accel
+
+    @njit(cache=False)
+    def kernel(u, v, r, d, n, ext, P, out):
+        for b in range(P.shape[1]):
+            for i in range(u.shape[0]):
+                a1, a2, a3 = accel(u[i], v[i], r[i], d[i], n[i], ext[0, b], ext[1, b], ext[2, b], P, b)
+                out[b, i, 0] = a1
+                out[b, i, 1] = a2
+                out[b, i, 2] = a3
+
+    return kernel
+
+
+def accelerations(vessel: Vessel, P: np.ndarray, u, v, r, delta, n, ext=None) -> np.ndarray:
+    """Accelerations (du, dv, dr) of the kind's equations of motion at given states, for each column of P.
+
+    P : (n_params, B); ext : (3, B) external forces [N, N, N m] or None. Returns (B, N, 3). Used to build
+    regressors of any kind without re-deriving its force model (see ``study.identify.regression``).
+    """
+    P = np.ascontiguousarray(P, dtype=np.float64)
+    if P.ndim == 1:
+        P = P[:, None]
+    ext = np.zeros((3, P.shape[1])) if ext is None else np.ascontiguousarray(ext, dtype=np.float64)
+    arrs = [np.ascontiguousarray(a, dtype=np.float64) for a in (u, v, r, delta, n)]
+    out = np.empty((P.shape[1], arrs[0].shape[0], 3))
+    _accel_kernel(vessel.kind_name)(*arrs, ext, P, out)
+    return out

@@ -224,7 +224,8 @@ def _accel_kernel(kind_name: str):
 
     accel = get_kind(kind_name).accel
 
-    @njit(cache=False)
+    # cached on disk: numba keys closures by their code and closure variables, so kinds do not collide
+    @njit(cache=True)
     def kernel(u, v, r, d, n, ext, P, out):
         for b in range(P.shape[1]):
             for i in range(u.shape[0]):

@@ -29,7 +29,6 @@ class CollectResults(Callback):
 
         root = _results_dir(config)
         runs, _ = ResultStore(root).collect()
-        log.info("results table: %s (%d runs) and %s", root / "runs.parquet", len(runs), root / "params.parquet")
         print(f"Results: {root / 'runs.parquet'} ({len(runs)} runs), {root / 'params.parquet'}")
 
     def on_run_end(self, config: DictConfig, **kwargs) -> None:
@@ -52,7 +51,6 @@ def main(cfg: DictConfig) -> dict:
     if status == "failed":
         msg += "\n" + str(record.get("error", "")).strip().splitlines()[-1]
     log.info(msg)
-    print(msg)
     return record
 
 

@@ -83,3 +83,11 @@ def test_two_process_sweep_resume_and_failure(tmp_path):
     failed = [r for r in recs.values() if r["status"] == "failed"]
     assert len(failed) == 1 and "h/T = 1.0" in failed[0]["error"]
     assert len(recs) == 6
+
+
+def test_experiment_overrides_the_primary_config():
+    # the experiment comes after _self_ in the defaults list, so its values win
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        base = compose(config_name="config")
+        smoke = compose(config_name="config", overrides=["experiment=smoke"])
+    assert base.sim.duration_scale == 1.0 and smoke.sim.duration_scale < 1.0

@@ -30,6 +30,7 @@ from __future__ import annotations
 import argparse
 import functools
 import hashlib
+import io
 import json
 import math
 import numbers
@@ -584,7 +585,18 @@ class ResultStore:
         """Read ``(runs, params)`` from the parquet files, collecting first when either is missing."""
         if not (self.runs_path.exists() and self.params_path.exists()):
             return self.collect()
-        return pd.read_parquet(self.runs_path), pd.read_parquet(self.params_path)
+        return read_table(self.runs_path), read_table(self.params_path)
+
+
+def read_table(path) -> pd.DataFrame:
+    """Read a parquet table safely while a collector may be replacing it.
+
+    The file is read into memory with one open() first: pyarrow's reader opens a path more than once (footer,
+    then pages), and between two opens ``os.replace`` may swap in the new file, giving "Page was smaller than
+    expected". One open pins one inode, so the snapshot is always whole.
+    """
+    with open(path, "rb") as fh:
+        return pd.read_parquet(io.BytesIO(fh.read()))
 
 
 # ---------------------------------------------------------------------------------------------- guarded run

@@ -12,7 +12,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from study.results import (NON_SCIENTIFIC_KEYS, ResultStore, provenance, run_guarded, run_id,
+from study.results import (NON_SCIENTIFIC_KEYS, ResultStore, provenance, read_table, run_guarded, run_id,
                            validate_record)
 
 REPO = Path(__file__).resolve().parents[1]
@@ -230,7 +230,7 @@ def test_collect_empty_and_load_collects(tmp_path):
     store = ResultStore(tmp_path / "fresh")
     runs, params = store.load()
     assert len(runs) == 0 and len(params) == 0 and store.runs_path.exists() and store.params_path.exists()
-    assert "run_id" in pd.read_parquet(store.runs_path)
+    assert "run_id" in read_table(store.runs_path)
 
 
 def test_collect_skips_corrupt_record(tmp_path):
@@ -274,8 +274,8 @@ def _collector(root, stop, errors):
     while not stop.is_set() or n < 2:
         try:
             store.collect()
-            pd.read_parquet(store.runs_path)
-            pd.read_parquet(store.params_path)
+            read_table(store.runs_path)
+            read_table(store.params_path)
         except Exception as e:  # pragma: no cover - reported to the parent
             errors.put(repr(e))
             return  # one report is enough (and an unread flood would keep this process from exiting)
@@ -296,8 +296,8 @@ def test_two_processes_write_and_collect(tmp_path):
         reads = 0
         deadline = time.time() + 120
         while any(p.is_alive() for p in writers) and time.time() < deadline:
-            runs = pd.read_parquet(store.runs_path)  # never torn, whatever the collectors are doing
-            pd.read_parquet(store.params_path)
+            runs = read_table(store.runs_path)  # never torn, whatever the collectors are doing
+            read_table(store.params_path)
             assert runs["run_id"].is_unique
             reads += 1
         winners = []  # drained before joining: a child exits only once its queue is flushed

@@ -1,0 +1,132 @@
+"""Loaders of the real free-running data in ``../shared/data/real`` into the record schema.
+
+The data are read where they are and never copied into this repository (their licences differ from ours;
+see each folder's SOURCE.md). ``STUDY_REAL_DATA`` overrides the location.
+
+- Esso Osaka 3 m model, Osaka University (Wakita et al. 2022, J Mar Sci Technol 27, 772-785; Miyauchi et al.
+  2022, J Mar Sci Technol 27, 1065-1083), CC BY-NC-SA 4.0. Already SI, radians, body velocities at midship,
+  delta > 0 to starboard (our convention). Wind directions were checked against the data here: the true and
+  apparent wind directions are where the wind comes FROM (recomputing the apparent wind from the true wind and
+  the ship's motion with that reading matches the logged apparent wind to 1e-3; the opposite reading misses
+  by 0.2-0.4 rad), the true one clockwise from x0, the apparent one from the bow, + from starboard.
+- KVLCC2 L7 model at HSVA, SIMMAN 2008 (Stern et al. 2011, J Ship Res 55, 135-147; HSVA report by A. Cura
+  Hochbaum 2006; redistributed by Alexandersson et al. 2022, Ocean Eng 266, 112940). Degrees, earth-fixed
+  velocities and delta > 0 to PORT in the files: converted here. The CPMC reference point is not stated in
+  the report excerpt we have; positions and velocities are taken as given (assumed midship, labelled in meta).
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .schema import Record, SchemaError, validate
+
+DATASETS = ("esso_osaka", "kvlcc2_hsva")
+
+
+def real_data_dir() -> Path:
+    env = os.environ.get("STUDY_REAL_DATA")
+    if env:
+        return Path(env)
+    return Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+
+
+ESSO_COLUMNS = {
+    "t [s]": "time", "x_position_mid [m]": "x0", "y_position_mid [m]": "y0", "u_velo [m/s]": "u",
+    "vm_velo [m/s]": "v", "psi_hat [rad]": "psi", "r_angvelo [rad/s]": "r", "n_prop [rps]": "n",
+    "delta_rudder [rad]": "delta", "wind_velo_true [m/s]": "wind_speed", "wind_dir_true [rad]": "wind_dir",
+    "wind_velo_relative_mid [m/s]": "wind_speed_rel", "wind_dir_relative_mid [rad]": "wind_angle_rel",
+}
+
+
+def load_esso_osaka(path, trim: bool = False) -> Record:
+    """One CSV of ``esso_osaka_frt/data/{zigzag,turning,random}``.
+
+    ``trim=True`` keeps the manoeuvre proper: from the first sample with |delta| >= 0.9 max|delta| after the
+    speed has built up (u above 80 % of its maximum) to the last sample with the propeller running (the rule
+    suggested in SOURCE.md).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such Esso Osaka file")
+    raw = pd.read_csv(path).dropna(how="all")  # one file ends with 327 all-empty rows
+    missing = [c for c in ESSO_COLUMNS if c not in raw.columns]
+    if missing:
+        raise SchemaError(f"{path}: not an Esso Osaka free-running file: missing columns {missing}")
+    df = raw[list(ESSO_COLUMNS)].rename(columns=ESSO_COLUMNS).astype(float)
+    df["psi"] = np.unwrap(df["psi"].to_numpy())  # psi_hat is wrapped to (-pi, pi]
+    df["wind_dir"] = np.mod(df["wind_dir"], 2 * np.pi)
+    df["wind_angle_rel"] = np.angle(np.exp(1j * df["wind_angle_rel"]))
+    if trim:
+        d = np.abs(df["delta"].to_numpy())
+        u = df["u"].to_numpy()
+        fast = u >= 0.8 * u.max()
+        start = int(np.argmax(fast & (d >= 0.9 * d[fast].max()))) if fast.any() else 0
+        running = np.where(df["n"].to_numpy() > 0)[0]
+        end = int(running[-1]) + 1 if running.size else len(df)
+        df = df.iloc[start:end]
+    df = df.reset_index(drop=True)
+    validate(df, path)
+    kind = path.parent.name
+    meta = {
+        "name": path.stem, "vessel": "esso_osaka", "maneuver": kind, "source": "Esso Osaka 3 m model, "
+        "Osaka University free-running tests (Wakita et al. 2022; Miyauchi et al. 2022), CC BY-NC-SA 4.0",
+        "reference_point": "midship", "x0_axis": "pond x0 (not north)", "trimmed": bool(trim),
+    }
+    return Record(data=df, meta=meta, path=str(path))
+
+
+def load_kvlcc2_hsva(path) -> Record:
+    """One ``.dat`` of ``kvlcc2_hsva/raw_data`` (cp1252, 4 header lines, 12 columns; see SOURCE.md)."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such HSVA file")
+    with open(path, encoding="cp1252") as fh:
+        header = [next(fh).strip() for _ in range(4)]
+    arr = np.loadtxt(path, skiprows=4, encoding="cp1252")
+    if arr.ndim != 2 or arr.shape[1] != 12:
+        raise SchemaError(f"{path}: expected 12 whitespace-separated columns after 4 header lines, "
+                          f"found shape {arr.shape}")
+    t, x0, y0, psi_deg, xd, yd, r_deg, phi_deg, delta_deg, n, thrust, torque = arr.T
+    psi = np.unwrap(np.radians(psi_deg))
+    df = pd.DataFrame({
+        "time": t, "x0": x0, "y0": y0, "psi": psi,
+        "u": xd * np.cos(psi) + yd * np.sin(psi),  # earth-fixed velocities to body axes
+        "v": -xd * np.sin(psi) + yd * np.cos(psi),
+        "r": np.radians(r_deg),
+        "delta": -np.radians(delta_deg),  # file: + to port (SIMMAN); schema: + to starboard
+        "n": n, "thrust": thrust, "torque": torque,
+    })
+    validate(df, path)
+    meta = {
+        "name": path.stem, "vessel": "kvlcc2_l7", "maneuver": header[2],
+        "source": "HSVA free-running tests of KVLCC2 (SIMMAN 2008; Stern et al. 2011), via Alexandersson "
+                  "et al. 2022", "reference_point": "as measured by the CPMC (assumed midship)",
+        "roll_deg_column_dropped": True,
+    }
+    return Record(data=df, meta=meta, path=str(path))
+
+
+def list_real_records(dataset: str, data_dir=None, kind: str | None = None) -> list[Path]:
+    """Sorted paths of a real dataset ('esso_osaka' optionally by kind 'zigzag'/'turning'/'random')."""
+    root = Path(data_dir) if data_dir else real_data_dir()
+    if dataset == "esso_osaka":
+        base = root / "esso_osaka_frt" / "data"
+        kinds = [kind] if kind else ["random", "turning", "zigzag"]
+        return sorted(p for k in kinds for p in (base / k).glob("*.csv"))
+    if dataset == "kvlcc2_hsva":
+        return sorted((root / "kvlcc2_hsva" / "raw_data").glob("*.dat"))
+    raise ValueError(f"unknown real dataset '{dataset}'; known: {list(DATASETS)}")
+
+
+def load_real(path) -> Record:
+    """Load a real file by its location/extension."""
+    path = Path(path)
+    if path.suffix.lower() == ".dat" and "kvlcc2" in path.name.lower():
+        return load_kvlcc2_hsva(path)
+    if path.suffix.lower() == ".csv" and "esso" in str(path).lower():
+        return load_esso_osaka(path)
+    raise SchemaError(f"{path}: not a known real-data file (HSVA KVLCC2 .dat or Esso Osaka .csv)")

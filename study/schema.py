@@ -1,0 +1,222 @@
+"""The schema of a measured (or simulated) manoeuvring record, its validation, reading and writing.
+
+One record = one manoeuvre = one table, SI units and radians, frames and signs of ``docs/conventions.md``.
+The column specification below is the single source of truth: validation and ``docs/schema.md`` follow it.
+Every error names the file and the problem, so a user with a bad file knows what to fix.
+"""
+from __future__ import annotations
+
+import glob as globmod
+import io
+import json
+import math
+import os
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import yaml
+
+
+@dataclass(frozen=True)
+class Column:
+    name: str
+    unit: str
+    required: bool
+    meaning: str
+    limit: float | None = None  # largest plausible |value|; above it the column is probably in other units
+
+
+COLUMNS = (
+    Column("time", "s", True, "time, strictly increasing"),
+    Column("u", "m/s", True, "surge velocity over ground, body axes"),
+    Column("v", "m/s", True, "sway velocity over ground, body axes, at the reference point (midship)"),
+    Column("r", "rad/s", True, "yaw rate, + turning to starboard", limit=2.0),
+    Column("x0", "m", True, "position north (earth-fixed)"),
+    Column("y0", "m", True, "position east (earth-fixed)"),
+    Column("psi", "rad", True, "heading, clockwise from north, unwrapped"),
+    Column("delta", "rad", True, "rudder (or nozzle) angle, + turns the ship to starboard", limit=1.2),
+    Column("n", "rps", True, "propeller speed (the waterjet vessel: jet velocity, m/s)"),
+    Column("delta_cmd", "rad", False, "commanded rudder angle", limit=1.2),
+    Column("wind_speed", "m/s", False, "true wind speed"),
+    Column("wind_dir", "rad", False, "true wind direction, where the wind comes FROM, clockwise from north"),
+    Column("wind_speed_rel", "m/s", False, "apparent wind speed at the reference point"),
+    Column("wind_angle_rel", "rad", False, "apparent wind angle, 0 = from ahead, + from starboard"),
+    Column("depth", "m", False, "water depth"),
+    Column("thrust", "N", False, "measured propeller thrust"),
+    Column("torque", "N m", False, "measured propeller torque"),
+)
+REQUIRED = tuple(c.name for c in COLUMNS if c.required)
+BY_NAME = {c.name: c for c in COLUMNS}
+SUPPORTED = (".csv", ".parquet")
+META_KEY = b"study.meta"
+
+
+class SchemaError(ValueError):
+    """A record that does not follow the schema; the message names the file and the problem."""
+
+
+@dataclass
+class Record:
+    """A record: the data (schema columns), its metadata, and where it came from."""
+
+    data: pd.DataFrame
+    meta: dict = field(default_factory=dict)
+    path: str | None = None
+
+    @property
+    def name(self) -> str:
+        return str(self.meta.get("name") or (Path(self.path).stem if self.path else "record"))
+
+
+def _where(path) -> str:
+    return str(path) if path else "<in-memory record>"
+
+
+def validate(df: pd.DataFrame, path=None, min_samples: int = 20) -> None:
+    """Raise :class:`SchemaError` if ``df`` is not a valid record; extra columns are allowed and kept."""
+    where = _where(path)
+    missing = [c for c in REQUIRED if c not in df.columns]
+    if missing:
+        raise SchemaError(f"{where}: missing required column(s) {missing}; found {list(df.columns)}. "
+                          f"Required: {list(REQUIRED)} (see docs/schema.md)")
+    if len(df) < min_samples:
+        raise SchemaError(f"{where}: too short: {len(df)} samples, at least {min_samples} are needed")
+    known = [c.name for c in COLUMNS if c.name in df.columns]
+    for c in known:
+        col = df[c]
+        if not pd.api.types.is_numeric_dtype(col):
+            raise SchemaError(f"{where}: column '{c}' is not numeric (dtype {col.dtype})")
+        vals = col.to_numpy(dtype=float)
+        bad = ~np.isfinite(vals)
+        if bad.any():
+            i = int(np.argmax(bad))
+            t = df["time"].iloc[i] if c != "time" else "?"
+            raise SchemaError(f"{where}: column '{c}' has {int(bad.sum())} NaN/inf value(s), the first at row {i} "
+                              f"(time {t}); drop or fill those rows")
+    t = df["time"].to_numpy(dtype=float)
+    dt = np.diff(t)
+    if (dt == 0).any():
+        i = int(np.argmax(dt == 0)) + 1
+        raise SchemaError(f"{where}: duplicated time {t[i]} at row {i}")
+    if (dt < 0).any():
+        i = int(np.argmax(dt < 0)) + 1
+        raise SchemaError(f"{where}: time is not increasing at row {i} ({t[i - 1]} -> {t[i]})")
+    for c in known:
+        lim = BY_NAME[c].limit
+        if lim is not None:
+            mx = float(np.max(np.abs(df[c].to_numpy(dtype=float))))
+            if mx > lim:
+                raise SchemaError(f"{where}: column '{c}' reaches |{c}| = {mx:.4g} {BY_NAME[c].unit}, more than "
+                                  f"the plausible {lim}: it looks like degrees where radians are expected; "
+                                  f"convert with numpy.deg2rad")
+    jumps = np.abs(np.diff(df["psi"].to_numpy(dtype=float)))
+    if jumps.size and jumps.max() > math.pi:
+        i = int(np.argmax(jumps)) + 1
+        raise SchemaError(f"{where}: column 'psi' jumps by {jumps.max():.4g} rad at row {i}: either degrees where "
+                          f"radians are expected (convert with numpy.deg2rad) or a wrapped heading "
+                          f"(unwrap with numpy.unwrap)")
+
+
+def from_arrays(time, u, v, r, x0, y0, psi, delta, n, **optional) -> pd.DataFrame:
+    cols = dict(time=time, u=u, v=v, r=r, x0=x0, y0=y0, psi=psi, delta=delta, n=n)
+    for k, val in optional.items():
+        if k not in BY_NAME:
+            raise SchemaError(f"unknown optional column '{k}'; known: {[c.name for c in COLUMNS]}")
+        cols[k] = val
+    return pd.DataFrame({k: np.asarray(val, dtype=float) for k, val in cols.items()})
+
+
+def _jsonable(meta: dict) -> dict:
+    return json.loads(json.dumps(meta, default=lambda o: o.item() if hasattr(o, "item") else str(o)))
+
+
+def read_record(path, min_samples: int = 20) -> Record:
+    """Read and validate a record from ``.csv`` (``# key: value`` metadata lines) or ``.parquet``."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such record file")
+    ext = path.suffix.lower()
+    if ext not in SUPPORTED:
+        raise SchemaError(f"{path}: unsupported file type '{ext}'; supported: {list(SUPPORTED)}")
+    meta: dict = {}
+    if ext == ".csv":
+        with open(path, encoding="utf-8") as fh:
+            lines = fh.read().splitlines(keepends=True)
+        body = []
+        for ln in lines:
+            if ln.startswith("#") and not body:
+                key, sep, value = ln[1:].partition(":")
+                if sep:
+                    try:
+                        meta[key.strip()] = yaml.safe_load(value.strip())
+                    except yaml.YAMLError:
+                        meta[key.strip()] = value.strip()
+            else:
+                body.append(ln)
+        try:
+            df = pd.read_csv(io.StringIO("".join(body)))
+        except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+            raise SchemaError(f"{path}: not a readable CSV table ({exc})") from exc
+    else:
+        import pyarrow.parquet as pq
+
+        try:
+            table = pq.read_table(path)
+        except Exception as exc:  # pyarrow raises several types for a damaged file
+            raise SchemaError(f"{path}: not a readable parquet file ({exc})") from exc
+        raw = (table.schema.metadata or {}).get(META_KEY)
+        meta = json.loads(raw) if raw else {}
+        df = table.to_pandas()
+    validate(df, path, min_samples=min_samples)
+    known = [c.name for c in COLUMNS if c.name in df.columns]
+    df[known] = df[known].astype(float)  # CSV gives int64 for whole numbers
+    return Record(data=df, meta=meta, path=str(path))
+
+
+def write_record(record: Record, path, overwrite: bool = False) -> Path:
+    """Validate and write a record atomically; an existing file is never replaced unless ``overwrite``."""
+    path = Path(path)
+    ext = path.suffix.lower()
+    if ext not in SUPPORTED:
+        raise SchemaError(f"{path}: unsupported file type '{ext}'; supported: {list(SUPPORTED)}")
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; refusing to overwrite it (pass overwrite=True / overwrite=true)")
+    validate(record.data, path)
+    meta = _jsonable(record.meta)
+    tmp = path.parent / f".{path.name}.{uuid.uuid4().hex[:8]}.tmp"
+    try:
+        if ext == ".csv":
+            head = "".join(f"# {k}: {json.dumps(v)}\n" for k, v in meta.items())
+            with open(tmp, "w", encoding="utf-8") as fh:
+                fh.write(head)
+                record.data.to_csv(fh, index=False, float_format="%.10g")
+        else:
+            import pyarrow as pa
+            import pyarrow.parquet as pq
+
+            table = pa.Table.from_pandas(record.data, preserve_index=False)
+            table = table.replace_schema_metadata({**(table.schema.metadata or {}),
+                                                   META_KEY: json.dumps(meta).encode()})
+            pq.write_table(table, tmp)
+        os.replace(tmp, path)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return path
+
+
+def read_records(spec, min_samples: int = 20) -> list[Record]:
+    """Records from a file, a folder (every .csv/.parquet inside, sorted) or a glob pattern."""
+    p = Path(str(spec)).expanduser()
+    if p.is_file():
+        files = [p]
+    elif p.is_dir():
+        files = sorted(f for f in p.iterdir() if f.suffix.lower() in SUPPORTED)
+    else:
+        files = sorted(Path(f) for f in globmod.glob(str(spec)) if Path(f).suffix.lower() in SUPPORTED)
+    if not files:
+        raise FileNotFoundError(f"{spec}: no record files (.csv/.parquet) found")
+    return [read_record(f, min_samples=min_samples) for f in files]

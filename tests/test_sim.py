@@ -144,3 +144,16 @@ def test_yaw_bias_turns_a_straight_ship(kvlcc2):
     straight = {"name": "straight", "type": "turning", "amp_deg": 0.0, "duration": 600.0}
     df = simulate(load_vessel("kvlcc2", [YawBias(N=0.0005)]), straight)
     assert df["r"].iloc[-1] > 0
+
+
+def test_replay_of_a_record_reproduces_it(kvlcc2):
+    """Replaying the recorded rudder and rps (actuator off) reproduces the closed-loop run: the rudder between
+    two samples is linear in both, so only round-off differs."""
+    from study.sim import replay
+
+    rec = simulate(kvlcc2, "zigzag_20_20", duration=600.0)
+    plain = kvlcc2.with_params(rudder_rate=0.0, rudder_lag=0.0, rudder_delay=0.0)
+    out = replay(plain, rec.time.to_numpy(), rec.delta.to_numpy(), rec.n.to_numpy(),
+                 [kvlcc2.U0, 0, 0, 0, 0, 0])
+    for j, col in enumerate(["u", "v", "r", "x0", "y0", "psi", "delta"]):
+        np.testing.assert_allclose(out[:, j, 0], rec[col].to_numpy(), rtol=1e-9, atol=1e-9, err_msg=col)

@@ -224,8 +224,8 @@ def _accel_kernel(kind_name: str):
 
     accel = get_kind(kind_name).accel
 
-    # cached on disk: numba keys closures by their code and closure variables, so kinds do not collide
-    @njit(cache=True)
+    # not cached on disk: a closure over a dispatcher pickles a random id, so the cache would never be hit
+    @njit(cache=False, error_model="numpy")
     def kernel(u, v, r, d, n, ext, P, out):
         for b in range(P.shape[1]):
             for i in range(u.shape[0]):

@@ -75,7 +75,7 @@ CONFIG_KEYS.update(m="m", Iz="I_z", xG="x_G")
  I_N0, I_N0U, I_N0UU) = (IDX[k] for k in _N_TERMS)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=False, inline="always", error_model="numpy")  # not cached: would go stale when fastmath changes
 def accel(u, v, r, delta, n, Xe, Ye, Ne, P, b):
     """Mariner-type Abkowitz model solved for (du, dv, dr) [SI]; ``n`` is unused."""
     rho = P[I_RHO, b]; L = P[I_L, b]; U0 = P[I_U0, b]

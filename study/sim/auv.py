@@ -79,7 +79,7 @@ U_MIN_FRAC = 0.05
  I_NV, I_NR, I_NRRR, I_NRAR, I_NVAV, I_XDD, I_YD, I_ND, I_ETA, I_QP) = range(len(PARAM_NAMES))
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=False, inline="always", error_model="numpy")  # not cached: would go stale when fastmath changes
 def accel(u, v, r, delta, n, Xe, Ye, Ne, P, b):
     """Seed 003 eqs. (1), (3)-(5) in the horizontal plane, solved for (du, dv, dr) [SI]."""
     rho = P[I_RHO, b]; L = P[I_L, b]

@@ -80,7 +80,7 @@ I_NV, I_NR, I_NRR, I_NVRR, I_NVVR = (IDX[k] for k in ("Nv", "Nr", "Nrr", "Nvrr",
 I_AJ, I_ALPHA, I_XT = (IDX[k] for k in ("Aj", "alpha", "xT"))
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(cache=False, inline="always", error_model="numpy")  # not cached: would go stale when fastmath changes
 def accel(u, v, r, delta, n, Xe, Ye, Ne, P, b):
     """Seed 000 eqs. (1)-(3) solved for (du, dv, dr); ``n`` is the jet velocity v_j [m/s]."""
     rho = P[I_RHO, b]; L = P[I_L, b]; d = P[I_D, b]

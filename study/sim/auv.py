@@ -40,6 +40,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .particulars import mass_and_inertia
+
 KIND = "auv"
 COEFF_SECTION = "hull"
 ADDED_MASS_KEYS = ("Y_vdot", "N_rdot")
@@ -124,11 +126,7 @@ def accel(u, v, r, delta, n, Xe, Ye, Ne, P, b):
 def pack(vessel: dict) -> np.ndarray:
     """Resolved vessel config -> parameter vector in ``PARAM_NAMES`` order (SI; hull/rudder non-dimensional)."""
     p = vessel["particulars"]
-    rho = float(p["rho"])
-    L = float(p["Lpp"])
-    ms = vessel["mass"]
-    m = float(ms["m"]) if ms.get("m") is not None else rho * float(p["volume"])
-    Iz = float(ms["IzG"]) if ms.get("IzG") is not None else m * (float(ms["kzz_L"]) * L) ** 2
+    rho, L, m, Iz = mass_and_inertia(vessel)
     h = vessel["hull"]
     pr = vessel["propeller"]
     vals = {"rho": rho, "L": L, "m": m, "Iz": Iz, "xG": float(p["xG"]), "U0": float(vessel["operation"]["U0"]),

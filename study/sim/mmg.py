@@ -14,6 +14,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .particulars import mass_and_inertia
+
 from . import fastmath as fm
 
 KIND = "mmg"
@@ -147,14 +149,10 @@ def accel(u, v, r, delta, n, Xe, Ye, Ne, P, b):
 def pack(vessel: dict) -> np.ndarray:
     """Turn a resolved vessel config (dict) into the parameter vector in ``PARAM_NAMES`` order (SI)."""
     p = vessel["particulars"]
-    rho = float(p["rho"])
-    L = float(p["Lpp"])
+    rho, L, m, IzG = mass_and_inertia(vessel)
     d = float(p["d"])
-    ms = vessel["mass"]
-    m = float(ms["m"]) if ms.get("m") is not None else rho * float(p["volume"])
     q_m = 0.5 * rho * L * L * d
     q_J = 0.5 * rho * L ** 4 * d
-    IzG = float(ms["IzG"]) if ms.get("IzG") is not None else m * (float(ms.get("kzz_L", 0.25)) * L) ** 2
     h = vessel["hull"]
     pr = vessel["propeller"]
     rd = vessel["rudder"]

@@ -51,6 +51,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .particulars import mass_and_inertia
+
 from . import fastmath as fm
 
 KIND = "waterjet"
@@ -115,12 +117,8 @@ def accel(u, v, r, delta, n, Xe, Ye, Ne, P, b):
 def pack(vessel: dict) -> np.ndarray:
     """Resolved vessel config -> parameter vector in ``PARAM_NAMES`` order (SI)."""
     p = vessel["particulars"]
-    rho = float(p["rho"])
-    L = float(p["Lpp"])
+    rho, L, m, Izz = mass_and_inertia(vessel)
     d = float(p["d"])
-    ms = vessel["mass"]
-    m = float(ms["m"]) if ms.get("m") is not None else rho * float(p["volume"])
-    Izz = float(ms["IzG"]) if ms.get("IzG") is not None else m * (float(ms["kzz_L"]) * L) ** 2
     if abs(float(p.get("xG", 0.0))) > 1e-12:
         raise ValueError(f"vessel '{vessel.get('name')}': the waterjet kind's origin is the centre of gravity "
                          "(seed 000 eq. 1); particulars.xG must be 0")

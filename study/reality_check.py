@@ -2,8 +2,8 @@
 
 ``python -m study.reality_check`` simulates the 10/10 and 20/10 zigzags, both sides first, from the measured
 approach speed, with the published MMG coefficients (Yasukawa & Yoshimura 2015) and the helm rate of the HSVA
-report, and puts overshoots and periods beside the measured ones in ``paper_figs/kvlcc2_hsva_zigzags.{csv,md}``
-and ``paper_figs/kvlcc2_hsva_zigzags.{png,pdf}``.
+report, and puts overshoots and periods beside the measured ones in ``paper_figs/kvlcc2_zigzags_vs_tank.{csv,md}``
+and ``paper_figs/kvlcc2_zigzags_vs_tank.{png,pdf}``.
 
 Two propeller settings are simulated, because they are the two defensible readings of "the HSVA test":
 ``mmg_self_propulsion`` (n solved so that the MMG model runs straight at the measured speed: the model is
@@ -92,9 +92,9 @@ def write_outputs(table: pd.DataFrame, traces: dict, out_dir: Path = OUT_DIR) ->
 
     out_dir.mkdir(parents=True, exist_ok=True)
     paths = []
-    csv = out_dir / "kvlcc2_hsva_zigzags.csv"
+    csv = out_dir / "kvlcc2_zigzags_vs_tank.csv"
     table.round(4).to_csv(csv, index=False)
-    md = out_dir / "kvlcc2_hsva_zigzags.md"
+    md = out_dir / "kvlcc2_zigzags_vs_tank.md"
     md.write_text("# KVLCC2 (L7 model) zigzags: MMG standard method against HSVA free-running tests\n\n"
                   "Overshoots in degrees, periods in seconds (model scale). Rebuilt by "
                   "`python -m study.reality_check`.\n\n" + table.round(2).to_markdown(index=False) + "\n")
@@ -115,7 +115,7 @@ def write_outputs(table: pd.DataFrame, traces: dict, out_dir: Path = OUT_DIR) ->
     np.atleast_1d(axes)[-1].set_xlabel("time [s] (model scale)")
     fig.tight_layout()
     for ext in ("png", "pdf"):
-        p = out_dir / f"kvlcc2_hsva_zigzags.{ext}"
+        p = out_dir / f"kvlcc2_zigzags_vs_tank.{ext}"
         fig.savefig(p, dpi=120, metadata={"CreationDate": None} if ext == "pdf" else {"Software": None})
         paths.append(p)
     plt.close(fig)

@@ -22,7 +22,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from .core import ENV_NAMES, N_ENV, OUT_NAMES, make_integrator
+from .core import ENV_NAMES, OUT_NAMES, make_integrator
 from .effects import apply_effects, env_vector, make_effect
 
 CONF_DIR = Path(__file__).resolve().parents[2] / "conf"

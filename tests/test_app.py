@@ -91,3 +91,16 @@ def test_experiment_overrides_the_primary_config():
         base = compose(config_name="config")
         smoke = compose(config_name="config", overrides=["experiment=smoke"])
     assert base.sim.duration_scale == 1.0 and smoke.sim.duration_scale < 1.0
+
+
+@pytest.mark.parametrize("environment", _options("environment"))
+def test_hidden_effects_flow_through_a_run(tmp_path, environment):
+    """Every environment option runs end to end. Current and wind act on the hull equations and bias the
+    estimates; a slow steering gear does not, because the record holds the actual rudder angle, not the
+    command (only a model driven by the command would see it)."""
+    out = run_study(_smoke_conf(tmp_path, noise="none", environment=environment, depth="h_T_2p9"))
+    drift = out["metrics"]["drift_median"]
+    if environment in ("calm", "rudder_lag"):
+        assert drift < 0.01
+    else:
+        assert drift > 0.01, f"{environment}: a hidden effect left no trace in the estimates"

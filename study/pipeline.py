@@ -90,7 +90,7 @@ def run_study(conf: dict) -> dict:
     params, identified = [], {}
     metrics = {"n_samples": reg.n_samples}
     for eq in reg.Phi:
-        est = make_estimator(est_cfg["name"], **(est_cfg.get("params") or {})).fit(reg.Phi[eq], reg.y[eq])
+        est = make_estimator(est_cfg).fit(reg.Phi[eq], reg.y[eq])
         resid = reg.y[eq] - reg.Phi[eq] @ est.coef_
         metrics[f"fit_rmse_{eq}"] = float(np.sqrt(np.mean(resid ** 2)))
         metrics[f"cond_{eq}"] = float(np.linalg.cond(reg.Phi[eq] / np.linalg.norm(reg.Phi[eq], axis=0)))

@@ -1,5 +1,6 @@
 """Every vessel config loads, holds its operating point and steers the right way; kind-specific checks of the
-waterjet USV (seed 000), the Mariner (Abkowitz, MSS mariner.m) and the AUV (seed 003, REMUS stand-in).
+waterjet USV (seed 000), the Mariner (Abkowitz, MSS mariner.m) and the AUV (seed 003, REMUS stand-in). The
+Nomoto kind and the linearised Nomoto parameters (study.sim.linearize) are tested in test_nomoto_kind.py.
 
 The first call of a kind compiles its integrator (a few seconds per kind).
 """
@@ -11,37 +12,13 @@ import pytest
 
 from study.sim import KINDS, accelerations, list_configs, load_vessel, read_config, simulate
 from study.sim.effects import ShallowWater
+from study.sim.linearize import linear_sway_yaw, nomoto
 
 VESSELS = list_configs("vessel")
 
 
 def _straight(duration):
     return {"name": "straight", "type": "turning", "amp_deg": 0.0, "duration": float(duration)}
-
-
-def linear_sway_yaw(vessel):
-    """Linear sway-yaw system at (U0, v = r = delta = 0, n0), by central differences of the kind's own accel:
-    d[v, r]/dt = A [v, r] + b delta. Returns A (2x2), b (2,)."""
-    P = vessel.params[:, None]
-    eps = 1e-7
-
-    def acc(dv, dr, dd):
-        arr = lambda x: np.array([x], dtype=float)  # noqa: E731
-        return accelerations(vessel, P, arr(vessel.U0), arr(dv), arr(dr), arr(dd), arr(vessel.n0))[0, 0, 1:]
-
-    J = np.zeros((2, 3))
-    for j, e in enumerate(np.eye(3) * eps):
-        J[:, j] = (acc(*e) - acc(*(-e))) / (2 * eps)
-    return J[:, :2], J[:, 2]
-
-
-def nomoto(A, b):
-    """Second-order Nomoto r/delta = K (1 + T3 s) / ((1 + T1 s)(1 + T2 s)) of the linear sway-yaw system."""
-    a1, a0 = -np.trace(A), np.linalg.det(A)  # s^2 + a1 s + a0
-    n1 = b[1]
-    n0 = A[1, 0] * b[0] - A[0, 0] * b[1]  # numerator of r/delta: n1 s + n0
-    T1, T2 = sorted((-1.0 / p).real for p in np.roots([1.0, a1, a0]))[::-1]
-    return n0 / a0, T1, T2, n1 / n0
 
 
 # ---------------------------------------------------------------------------------------------- every vessel
@@ -71,6 +48,10 @@ def test_shallow_water_acts_on_the_kinds_linear_derivatives(name):
         assert key in deep.cfg[kind.COEFF_SECTION], f"{name}: {kind.COEFF_SECTION}.{key} missing"
     for key in kind.ADDED_MASS_KEYS:
         assert key in deep.cfg[kind.COEFF_SECTION], f"{name}: {kind.COEFF_SECTION}.{key} missing"
+    if not kind.LINEAR_DERIVATIVES:  # no hull derivatives (nomoto): shallow water is refused, not ignored
+        with pytest.raises(ValueError, match="no hull derivatives"):
+            load_vessel(name, [ShallowWater(h_T=1.5, formula="ankudinov")])
+        return
     shallow = load_vessel(name, [ShallowWater(h_T=1.5, formula="ankudinov")])
     changed = [n for n, a, b in zip(deep.param_names, deep.params, shallow.params) if a != b]
     assert len(changed) >= 4, changed
@@ -149,19 +130,12 @@ def test_usv_jet_forward_of_the_neutral_point_steers_in_reverse(usv):
     assert df["r"].iloc[50] > 0  # the jet's own moment first
     assert df["r"].iloc[-1] < 0  # then the hull's drift moment wins
     A, b = linear_sway_yaw(plausible)
-    assert nomoto(A, b)[0] < 0  # negative steady-state gain
-    assert nomoto(*linear_sway_yaw(usv))[0] > 0  # the config's lever arm: normal steering
+    assert nomoto(A, b)["K"] < 0  # negative steady-state gain
+    assert nomoto(*linear_sway_yaw(usv))["K"] > 0  # the config's lever arm: normal steering
 
 
 # ------------------------------------------------------------------------------- Mariner (Abkowitz, mariner.m)
-def test_mariner_linearised_nomoto_matches_fossen():
-    # vessels.md / MSS exNomoto.m: K = 0.185 1/s, T1 = 118 s, T2 = 7.8 s, T3 = 18.5 s
-    v = load_vessel("mariner")
-    K, T1, T2, T3 = nomoto(*linear_sway_yaw(v))
-    assert K == pytest.approx(0.185, rel=0.01)
-    assert T1 == pytest.approx(118.0, rel=0.01)
-    assert T2 == pytest.approx(7.8, rel=0.02)
-    assert T3 == pytest.approx(18.5, rel=0.01)
+# test_mariner_linearised_nomoto_matches_fossen: in test_nomoto_kind.py (with study.sim.linearize)
 
 
 def test_mariner_rudder_dynamics_follow_mariner_m():

@@ -7,8 +7,10 @@ Public entry points::
     df = simulate(vessel, "zigzag_10_10")          # a schema DataFrame (see docs/schema.md)
 
 A vessel *kind* is a module with ``KIND``, ``PARAM_NAMES``, ``COEFF_SECTION``, ``LINEAR_DERIVATIVES``,
-``accel`` (numba) and ``pack(cfg)``; optionally ``solve_n(params, U0)`` for self-propulsion. Kinds are
-discovered from ``KINDS`` below; adding one is one module plus one line.
+``accel`` (numba) and ``pack(cfg)``; optionally ``ADDED_MASS_KEYS``, ``solve_n(params, U0)`` for
+self-propulsion, and ``KINEMATIC_SWAY = False`` with ``aux_state_at_rest(P, delta)`` for a model without a
+sway velocity that carries an auxiliary state in the integrator's ``v_w`` slot instead (``nomoto``: see
+``study.sim.core``). Kinds are discovered from ``KINDS`` below; adding one is one module plus one line.
 """
 from __future__ import annotations
 
@@ -33,6 +35,7 @@ KINDS = {
     "waterjet": "study.sim.waterjet",
     "abkowitz": "study.sim.abkowitz",
     "auv": "study.sim.auv",
+    "nomoto": "study.sim.nomoto",
 }
 
 
@@ -46,7 +49,7 @@ def get_kind(name: str):
 def integrator(kind_name: str):
     """Compiled batch integrator of a kind (compiled once per process, on first use)."""
     kind = get_kind(kind_name)
-    return make_integrator(kind.accel, len(kind.PARAM_NAMES))
+    return make_integrator(kind.accel, len(kind.PARAM_NAMES), getattr(kind, "KINEMATIC_SWAY", True))
 
 
 def read_config(group: str, name: str) -> dict:
@@ -159,6 +162,27 @@ def initial_state(vessel: Vessel, u0: float | None = None, psi0: float = 0.0) ->
     return np.array([vessel.U0 if u0 is None else u0, 0.0, 0.0, 0.0, 0.0, psi0])
 
 
+def _aux_at_rest(vessel: Vessel, P: np.ndarray, y0: np.ndarray, delta0: float) -> np.ndarray:
+    """y0 with the ``v_w`` slot set to the kind's auxiliary state at rest, for a kind whose ``v_w`` is not a
+    sway velocity (``KINEMATIC_SWAY = False``, e.g. ``nomoto``); other kinds: y0 unchanged.
+
+    The initial rudder of the integrator is the first command clipped to each member's delta_max.
+    """
+    kind = vessel.kind
+    if getattr(kind, "KINEMATIC_SWAY", True):
+        return y0
+    P = np.asarray(P, float)
+    P2 = P if P.ndim == 2 else P[:, None]
+    nk = len(kind.PARAM_NAMES)
+    dmax = P2[nk + ENV_NAMES.index("delta_max")]
+    aux = kind.aux_state_at_rest(P2[:nk], np.clip(float(delta0), -dmax, dmax))  # (B,)
+    y0 = np.array(y0, dtype=float)  # a copy: the caller's state is not changed
+    if y0.ndim == 1 and P.ndim == 2 and P.shape[1] > 1:
+        y0 = np.repeat(y0[:, None], P.shape[1], axis=1)
+    y0[1] = aux if y0.ndim == 2 else aux[0]
+    return y0
+
+
 def to_frame(out: np.ndarray, t: np.ndarray, member: int = 0) -> pd.DataFrame:
     df = pd.DataFrame(out[:, :, member], columns=list(OUT_NAMES))
     df.insert(0, "time", t)
@@ -190,7 +214,8 @@ def simulate(vessel, maneuver, effects=(), dt: float | None = None, sample_dt: f
     nsteps -= nsteps % save_every
     ctrl, cmd = man.encode(vessel, dt, nsteps, seed=seed)
     nprop = np.full(nsteps + 1, vessel.n0)
-    out = run(vessel, vessel.params, initial_state(vessel, u0, psi0), dt, nsteps, cmd, nprop, ctrl, save_every)
+    y0 = _aux_at_rest(vessel, vessel.params, initial_state(vessel, u0, psi0), cmd[0])
+    out = run(vessel, vessel.params, y0, dt, nsteps, cmd, nprop, ctrl, save_every)
     t = np.arange(out.shape[0]) * sample_dt
     return to_frame(out, t)
 
@@ -201,6 +226,9 @@ def replay(vessel: Vessel, time: np.ndarray, delta: np.ndarray, n: np.ndarray, s
 
     ``delta`` is applied as the rudder command: with the vessel's rudder rate, lag and delay (set them to 0
     to apply the measured angle directly). ``state0`` = [u_w, v_w, r, x0, y0, psi]. Returns (n, 8, B).
+    For a kind whose ``v_w`` slot is not a sway velocity (``KINEMATIC_SWAY = False``: ``nomoto``) the given
+    v_w is ignored: the slot starts at the kind's auxiliary state at rest (r' = 0) for the first rudder angle
+    (a record's ``v`` is the drift over ground, not that state).
     """
     time = np.asarray(time, float)
     dts = np.diff(time)
@@ -215,7 +243,8 @@ def replay(vessel: Vessel, time: np.ndarray, delta: np.ndarray, n: np.ndarray, s
     from ..maneuvers import open_loop_ctrl
 
     P = vessel.params if P is None else P
-    return run(vessel, P, np.asarray(state0, float), dt, nsteps, cmd, nprop, open_loop_ctrl(), substeps)
+    state0 = _aux_at_rest(vessel, P, np.asarray(state0, float), cmd[0])
+    return run(vessel, P, state0, dt, nsteps, cmd, nprop, open_loop_ctrl(), substeps)
 
 
 @lru_cache(maxsize=None)

@@ -14,6 +14,11 @@ may differ in any of them; that is what DE populations and emcee walkers need.
 State carried by the integrator: ``u_w, v_w`` (velocities relative to the water), ``r``, ``x0, y0``, ``psi``.
 Output columns (``OUT_NAMES``): ``u, v`` over ground (what GNSS measures), ``r``, ``x0``, ``y0``, ``psi``,
 ``delta`` (actual rudder angle), ``n``.
+
+A kind whose model has no sway velocity (``study.sim.nomoto``: a yaw response model) declares
+``KINEMATIC_SWAY = False`` and carries an auxiliary state of its own in the ``v_w`` slot: the kinematics and
+the wind then use v_w = 0, and the output ``v`` is the current's contribution only (a ship without drift).
+The flag is a compile-time constant of each kind's instance of the loop (LLVM removes the unused side).
 """
 from __future__ import annotations
 
@@ -106,8 +111,9 @@ def _wind_forces(u_w, v_w, cp, sp, P, k0, b, ccd, scd, cwd, swd):
 def _templates():
     """The integrator's two functions, as templates: ``make_integrator`` instantiates them per vessel kind.
 
-    They read the kind's ``ACCEL`` and ``K0`` (offset of the environment block in ``P``) as globals (each
-    instance gets its own globals dict) and ``_RUN`` likewise; their only closure variable is ``fingerprint``,
+    They read the kind's ``ACCEL``, ``K0`` (offset of the environment block in ``P``) and ``KINEMATIC_SWAY``
+    (is ``v_w`` a sway velocity?) as globals (each instance gets its own globals dict) and ``_RUN`` likewise;
+    their only closure variable is ``fingerprint``,
     which makes the on-disk cache key deterministic and specific to the kind and its sources (numba keys a
     cached closure by its code and the pickled closure variables; a pickled dispatcher carries a random uuid,
     so a closure over ``accel`` itself would never be found in the cache again).
@@ -199,7 +205,7 @@ def _templates():
             if k % save_every == 0:
                 for b in range(B):
                     ug = u[b]
-                    vg = v[b]
+                    vg = v[b] if KINEMATIC_SWAY else 0.0
                     if has_current:
                         s_, c_ = fm.sincos(psi[b])
                         ug = ug + (C[4, b] * c_ + C[5, b] * s_)
@@ -246,11 +252,12 @@ def _templates():
                         ns = n0 if st == 0 else (nm if st < 3 else n1)
                         ds = d0 if st == 0 else (dm if st < 3 else d1)
                         sn, cs = fm.sincos(ps)
+                        vk = vs if KINEMATIC_SWAY else 0.0  # the sway velocity of the kinematics
                         X = P[k0 + 11, b]
                         Y = P[k0 + 12, b]
                         N = P[k0 + 13, b]
                         if has_wind:
-                            wX, wY, wN = _wind_forces(us, vs, cs, sn, P, k0, b, C[0, b], C[1, b], C[2, b],
+                            wX, wY, wN = _wind_forces(us, vk, cs, sn, P, k0, b, C[0, b], C[1, b], C[2, b],
                                                       C[3, b])
                             X += wX
                             Y += wY
@@ -259,8 +266,8 @@ def _templates():
                         ku = ku + wt * a
                         kv = kv + wt * bb
                         kr = kr + wt * cc
-                        kx = kx + wt * (us * cs - vs * sn + C[4, b])
-                        ky = ky + wt * (us * sn + vs * cs + C[5, b])
+                        kx = kx + wt * (us * cs - vk * sn + C[4, b])
+                        ky = ky + wt * (us * sn + vk * cs + C[5, b])
                         kp = kp + wt * rs
                         us = u1 + hn * a
                         vs = v1 + hn * bb
@@ -289,17 +296,18 @@ def _templates():
                     rs = wr[b]
                     ps = wp[b]
                     sn, cs = fm.sincos(ps)
+                    vk = vs if KINEMATIC_SWAY else 0.0  # the sway velocity of the kinematics
                     X = P[k0 + 11, b]
                     Y = P[k0 + 12, b]
                     N = P[k0 + 13, b]
                     if has_wind:  # loop-invariant: skipped in scalar code, a masked select in vector code
-                        wX, wY, wN = _wind_forces(us, vs, cs, sn, P, k0, b, C[0, b], C[1, b], C[2, b], C[3, b])
+                        wX, wY, wN = _wind_forces(us, vk, cs, sn, P, k0, b, C[0, b], C[1, b], C[2, b], C[3, b])
                         X += wX
                         Y += wY
                         N += wN
                     a, bb, cc = ACCEL(us, vs, rs, D[row, b], ns, X, Y, N, P, b)
-                    xd = us * cs - vs * sn + C[4, b]
-                    yd = us * sn + vs * cs + C[5, b]
+                    xd = us * cs - vk * sn + C[4, b]
+                    yd = us * sn + vk * cs + C[5, b]
                     wu[b] = u[b] + hn * a
                     wv[b] = v[b] + hn * bb
                     wr[b] = r[b] + hn * cc
@@ -397,16 +405,17 @@ def _templates():
 _RUN_TEMPLATE, _INTEGRATE_TEMPLATE = _templates()
 
 
-def _kind_tag(accel, n_kind_params: int) -> str:
-    """A short stable name for a kind's integrator: its accel's module and qualname and its parameter count."""
+def _kind_tag(accel, n_kind_params: int, kinematic_sway: bool = True) -> str:
+    """A short stable name for a kind's integrator: its accel's module and qualname, its parameter count and
+    its ``KINEMATIC_SWAY`` flag (a compile-time constant of the loop, so it must be part of the cache key)."""
     py = getattr(accel, "py_func", accel)
-    h = hashlib.sha256(f"{py.__module__}.{py.__qualname__}:{n_kind_params}".encode())
+    h = hashlib.sha256(f"{py.__module__}.{py.__qualname__}:{n_kind_params}:{bool(kinematic_sway)}".encode())
     for cell in py.__closure__ or ():  # accel built by a factory: its closure values (repr) as well
         h.update(repr(cell.cell_contents).encode())
     return f"{py.__module__.rsplit('.', 1)[-1]}_{h.hexdigest()[:10]}"
 
 
-def _fingerprint(accel, n_kind_params: int) -> int:
+def _fingerprint(accel, n_kind_params: int, kinematic_sway: bool = True) -> int:
     """A hash of everything the compiled integrator of a kind depends on besides this file's code.
 
     numba's cache checks this file's time stamp and the function's own code only; functions reached through
@@ -414,7 +423,7 @@ def _fingerprint(accel, n_kind_params: int) -> int:
     package and of the kind's module, plus the kind's tag and accel's code.
     """
     py = getattr(accel, "py_func", accel)
-    h = hashlib.sha256(_kind_tag(accel, n_kind_params).encode())
+    h = hashlib.sha256(_kind_tag(accel, n_kind_params, kinematic_sway).encode())
     h.update(py.__code__.co_code)
     files = set(Path(__file__).resolve().parent.glob("*.py"))
     mod = sys.modules.get(py.__module__)
@@ -441,7 +450,7 @@ def _instantiate(template, tag, fingerprint, **names):
     return fn
 
 
-def make_integrator(accel, n_kind_params):
+def make_integrator(accel, n_kind_params, kinematic_sway: bool = True):
     """Build the compiled batch integrator for one vessel kind (cached on disk by numba).
 
     Parameters
@@ -454,6 +463,11 @@ def make_integrator(accel, n_kind_params):
         ``math.*`` calls or data-dependent branches it runs member after member, with the same results.
     n_kind_params : int
         Number of the kind's own parameters; the environment block starts there.
+    kinematic_sway : bool
+        The kind's ``KINEMATIC_SWAY`` (default True: ``v_w`` is the sway velocity through the water). False:
+        ``v_w`` is an auxiliary state of the kind's model (integrated like the others, e.g. the Nomoto
+        second-order state of ``study.sim.nomoto``); the kinematics, the wind and the output ``v`` then take
+        the sway velocity as 0. A constant of the compiled loop: the other kinds' code is unchanged.
 
     Returns the compiled ``integrate(y0, P, dt, nsteps, save_every, cmd, nprop, ctrl, out)``; its
     attribute ``run_loop`` is the compiled time loop (``integrate.run_loop.inspect_asm(...)``).
@@ -470,10 +484,11 @@ def make_integrator(accel, n_kind_params):
     The compiled functions are cached on disk (``study/sim/__pycache__``), keyed on the sources of this
     package and of the kind's module: the first call in a new process takes ~0.01 s instead of seconds.
     """
-    tag = _kind_tag(accel, n_kind_params)
-    fp = _fingerprint(accel, n_kind_params)
+    kinematic_sway = bool(kinematic_sway)
+    tag = _kind_tag(accel, n_kind_params, kinematic_sway)
+    fp = _fingerprint(accel, n_kind_params, kinematic_sway)
     run = njit(cache=True, _nrt=False, pipeline_class=_NoAliasCompiler, **JIT_FLAGS)(
-        _instantiate(_RUN_TEMPLATE, tag, fp, ACCEL=accel, K0=n_kind_params))
+        _instantiate(_RUN_TEMPLATE, tag, fp, ACCEL=accel, K0=n_kind_params, KINEMATIC_SWAY=kinematic_sway))
     integrate = njit(cache=True, **JIT_FLAGS)(
         _instantiate(_INTEGRATE_TEMPLATE, tag, fp, _RUN=run, K0=n_kind_params))
     integrate.run_loop = run

@@ -182,6 +182,8 @@ class ShallowWater:
     (2020, Ocean Eng 195:106679): R'0, X'vv, X'vr, N'vvr, N'vrr, 1-t_P, 1-w_P, gamma_R (``interaction=True``).
     Added mass: Ankudinov's factor when ``formula='ankudinov'``, otherwise unchanged (assumption, labelled:
     the Kijima set gives no added-mass factor). ``h_T = None`` or ``inf`` is deep water (no change).
+    A kind without hull derivatives (``LINEAR_DERIVATIVES`` empty: ``nomoto``) raises a ValueError in shallow
+    water; the depth changes K and T of a real ship, and a Nomoto truth would need them from elsewhere.
     Seed 001 classes h/T > 3 deep, 1.5-3 medium, 1.2-1.5 shallow, < 1.2 very shallow.
     """
 
@@ -210,6 +212,10 @@ class ShallowWater:
         kind = get_kind(vessel_cfg["kind"])
         H = 1.0 / float(self.h_T)
         sec, names = kind.COEFF_SECTION, kind.LINEAR_DERIVATIVES
+        if not names:  # e.g. a Nomoto model: no hull derivatives (as Wind raises without a windage block)
+            raise ValueError(f"shallow_water: vessel '{vessel_cfg.get('name')}' is of kind '{vessel_cfg['kind']}', "
+                             "which has no hull derivatives for the depth factors to act on (its "
+                             "LINEAR_DERIVATIVES is empty); use deep water (h_T = null) or a hull-based kind")
         for generic, key in names.items():
             vessel_cfg[sec][key] = float(vessel_cfg[sec][key]) * fac[generic]
         if "added_mass" in fac:

@@ -9,10 +9,9 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import pandas as pd
 
 from . import maneuvers as man_mod
-from .identify.estimators import make_estimator
-from .identify.regression import build
 from .measure import MeasurementModel
 from .metrics import prediction_metrics, standard_metrics
 from .sim import default_dt, load_vessel, simulate
@@ -64,56 +63,76 @@ def simulate_set(vessel, names, conf, seed_base):
     return out
 
 
+def _skip_reason(model, structure, estimator) -> str | None:
+    """Why this model x structure x estimator cannot run (None when it can)."""
+    for who in (model, estimator):
+        skip, why = who.skip(structure) if who is model else who.skip(model, structure)
+        if skip:
+            return why
+    return None
+
+
+def _trace_bytes(meas, pred, channels, max_rows: int = 600) -> bytes:
+    """Truth and prediction of one validation manoeuvre, thinned to at most ``max_rows`` rows, as CSV."""
+    step = max(1, int(np.ceil(len(meas) / max_rows)))
+    m = meas.iloc[::step].reset_index(drop=True)
+    out = {"time": m["time"]}
+    for c in ("u", "v", "r", "x0", "y0", "psi", "delta"):
+        out[f"truth_{c}"] = m[c]
+        if c in pred:
+            out[f"model_{c}"] = np.interp(m["time"], pred["time"], pred[c])
+    return pd.DataFrame(out).to_csv(index=False, float_format="%.7g").encode("utf-8")
+
+
 def run_study(conf: dict) -> dict:
-    """Run one configuration; returns ``{'metrics', 'params', 'timings'}`` (see study.results)."""
+    """Run one configuration; returns ``{'metrics', 'params', 'timings', 'artefacts'}`` or a skipped result
+    ``{'status': 'skipped', 'error': reason}`` for a combination that makes no sense (see study.results)."""
+    from .identify.estimators import make_estimator
+    from .identify.fit import identify
+    from .identify.models import make_model
+    from .identify.structures import make_structure
+
     timings = {}
     seed = int(conf.get("seed", 0))
-    t0 = time.perf_counter()
     truth, base = vessels_for(conf)
+    model = make_model(conf["model"], base)
+    structure = make_structure(conf["structure"])
+    estimator = make_estimator(conf["estimator"])
+    why = _skip_reason(model, structure, estimator)
+    if why:
+        return {"status": "skipped", "error": why, "metrics": {}, "params": [], "timings": {}}
+
+    t0 = time.perf_counter()
     mans = conf["maneuvers"]
     clean_train = simulate_set(truth, mans["train"], conf, seed_base=1000 * seed)
     timings["simulate_train"] = time.perf_counter() - t0
-
     t0 = time.perf_counter()
     records = []
     for i, (name, df) in enumerate(clean_train.items()):
         records.append(measurement(conf, seed=seed * 7919 + i).apply(df))
     timings["measure"] = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
-    model = conf["model"]
-    reg = build(base, model, records, conf["structure"]["name"])
-    timings["regressors"] = time.perf_counter() - t0
-
-    est_cfg = conf["estimator"]
-    t0 = time.perf_counter()
-    params, identified = [], {}
-    metrics = {"n_samples": reg.n_samples}
-    for eq in reg.Phi:
-        est = make_estimator(est_cfg).fit(reg.Phi[eq], reg.y[eq])
-        resid = reg.y[eq] - reg.Phi[eq] @ est.coef_
-        metrics[f"fit_rmse_{eq}"] = float(np.sqrt(np.mean(resid ** 2)))
-        metrics[f"cond_{eq}"] = float(np.linalg.cond(reg.Phi[eq] / np.linalg.norm(reg.Phi[eq], axis=0)))
-        for name, value, true in zip(reg.names[eq], est.coef_, reg.truth[eq]):
-            params.append({"equation": eq, "name": name, "estimate": float(value), "truth": true})
-            identified[name] = float(value)
-    timings["fit"] = time.perf_counter() - t0
-    rel = [abs(p["estimate"] - p["truth"]) / abs(p["truth"]) for p in params if p["truth"]]
-    metrics["drift_median"] = float(np.median(rel)) if rel else float("nan")
-    metrics["drift_max"] = float(np.max(rel)) if rel else float("nan")
+    ident = identify(model, structure, conf["estimator"], records, seed=seed,
+                     progress=bool(conf.get("progress", False)))
+    timings.update(ident.timings)
+    metrics = {"n_samples": int(sum(len(r) for r in records)), **ident.metrics}
+    artefacts = dict(ident.artefacts)
 
     # validation: the identified model (depth known, environment unknown) against the truth
     t0 = time.perf_counter()
-    model_vessel = base.with_params(**identified)
+    model_vessel = model.model_vessel(ident.estimates)
     truth_val = simulate_set(truth, mans["validate"], conf, seed_base=1000 * seed + 500)
     pred_val = simulate_set(model_vessel, mans["validate"], conf, seed_base=1000 * seed + 500)
     L = truth.L
+    chans = model.channels
+    keep_traces = bool((conf.get("artefacts") or {}).get("traces", True))
     for name in truth_val:
         meas, pred = truth_val[name], pred_val[name]
-        if not np.all(np.isfinite(pred[["u", "v", "r", "psi"]].to_numpy())):
+        if not np.all(np.isfinite(pred[list(chans)].to_numpy())):
             metrics[f"val_{name}_diverged"] = 1.0
             continue
-        for k, v in prediction_metrics(meas, pred).items():
+        metrics[f"val_{name}_diverged"] = 0.0
+        for k, v in prediction_metrics(meas, pred, channels=chans).items():
             if np.isscalar(v):
                 metrics[f"val_{name}_{k}"] = float(v)
         for label, df in (("truth", meas), ("model", pred)):
@@ -123,5 +142,7 @@ def run_study(conf: dict) -> dict:
                         metrics[f"val_{name}_{label}_{k}"] = float(v)
             except ValueError:
                 pass  # a metric the record cannot carry (e.g. too short) is simply absent
+        if keep_traces:
+            artefacts[f"validation/{name}.csv"] = _trace_bytes(meas, pred, chans)
     timings["validate"] = time.perf_counter() - t0
-    return {"metrics": metrics, "params": params, "timings": timings}
+    return {"metrics": metrics, "params": ident.params, "timings": timings, "artefacts": artefacts}

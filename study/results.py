@@ -54,7 +54,7 @@ import pandas as pd
 from filelock import FileLock
 
 #: Top-level configuration keys that do not change the science of a run, so they are left out of the run id.
-NON_SCIENTIFIC_KEYS = frozenset({"hydra", "results_dir", "out", "launcher", "progress", "n_jobs"})
+NON_SCIENTIFIC_KEYS = frozenset({"hydra", "results_dir", "out", "launcher", "progress", "n_jobs", "artefacts"})
 
 #: Record status values; 'ok' and 'skipped' count as finished (resume skips them), 'failed' is rerun.
 STATUSES = ("ok", "failed", "skipped")
@@ -66,7 +66,9 @@ REQUIRED_FIELDS = ("run_id", "status", "config", "metrics", "params", "timings",
 
 #: Keys every entry of ``params`` must have; the optional ones default to None.
 PARAM_REQUIRED = ("equation", "name", "estimate", "truth")
-PARAM_OPTIONAL = ("ci_low", "ci_high", "std")
+PARAM_OPTIONAL = ("ci_low", "ci_high", "std", "vif", "selected")
+#: Optional text keys of a params entry: how the truth was obtained ('exact', 'approximate', 'derived', ...).
+PARAM_TEXT = ("truth_kind",)
 
 #: Config columns copied into the params table (when present) so it can be filtered without a join.
 PARAM_CONFIG_COLUMNS = ("cfg_vessel.name", "cfg_model.name", "cfg_estimator.name", "cfg_structure.name",
@@ -77,7 +79,7 @@ PROVENANCE_PACKAGES = ("numpy", "scipy", "scikit-learn", "pandas", "pysindy", "e
 
 RUN_BASE_COLUMNS = ["run_id", "status", "error", "seed", "started", "finished", "wall_time", "artefacts"]
 PARAM_BASE_COLUMNS = ["run_id", "equation", "name", "estimate", "truth", "rel_error", "abs_error",
-                      "ci_low", "ci_high", "std"]
+                      "ci_low", "ci_high", "std", "vif", "selected", "truth_kind"]
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # a per-run lock is held only for the few ms of a write; the timeout guards against a wedged file system
@@ -276,6 +278,8 @@ def validate_record(record: dict) -> None:
             errs += [f"params[{i}] lacks {k!r}" for k in PARAM_REQUIRED if k not in p]
             errs += [f"params[{i}][{k!r}] is not a number or None" for k in ("estimate", "truth", *PARAM_OPTIONAL)
                      if k in p and not (p[k] is None or _is_number(p[k]))]
+            errs += [f"params[{i}][{k!r}] is not a string or None" for k in PARAM_TEXT
+                     if k in p and not (p[k] is None or isinstance(p[k], str))]
     if record["seed"] is not None and not isinstance(record["seed"], numbers.Integral):
         errs.append("seed must be an int or None")
     err = record["error"]
@@ -378,7 +382,8 @@ def _param_rows(rec: dict, run_row: dict) -> list[dict]:
                      "estimate": est, "truth": truth,
                      "rel_error": (est - truth) / abs(truth) if nonzero else math.nan,
                      "abs_error": abs(est - truth),  # NaN when truth is unknown (NaN propagates)
-                     **{k: _finite_float(p.get(k)) for k in PARAM_OPTIONAL}, **copied})
+                     **{k: _finite_float(p.get(k)) for k in PARAM_OPTIONAL},
+                     **{k: p.get(k) for k in PARAM_TEXT}, **copied})
     return rows
 
 
@@ -387,7 +392,7 @@ def _frame(rows: list[dict], base: list[str]) -> pd.DataFrame:
     for c in base:
         if c not in df:
             df[c] = pd.Series(dtype=object if c not in ("wall_time", "estimate", "truth", "rel_error", "abs_error",
-                                                        "ci_low", "ci_high", "std") else float)
+                                                        *PARAM_OPTIONAL) else float)
     df = df[base + [c for c in df.columns if c not in base]]
     for c in df.columns:
         if c != "error":  # error stays text (or null) whatever the other columns hold

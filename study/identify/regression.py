@@ -10,8 +10,9 @@ they are read off the compiled ``accel`` of the kind itself:
 - phi_i = M (a(theta_i = 1) - a_known).
 
 Rows are scaled by 0.5 rho L d U0^2 (X, Y) and 0.5 rho L^2 d U0^2 (N), so the coefficients stay in the kind's
-own units (non-dimensional for MMG) while the numbers stay O(1). Known parts (mass, added mass, propeller,
-rudder) come from the vessel; which coefficients are unknown comes from the model config.
+own units (non-dimensional for MMG) while the numbers stay O(1). The sample structure decides where the rows
+are (``study.identify.structures``): the node-wise quantities a_known and phi_i go through its ``value``
+operator, the measured velocities through its derivative ``d``.
 """
 from __future__ import annotations
 
@@ -20,14 +21,36 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..sim import Vessel, accelerations
-from .structures import get_structure
 
-EQUATIONS = ("X", "Y", "N")
+STATE_RATES = ("u", "v", "r")
+
+
+def kind_regressors(vessel: Vessel, P0: np.ndarray, idx: list, nodes: dict, raw: dict, ops, scale: np.ndarray):
+    """Targets (m, 3) and regressors (m, 3, k) of one segment for the coefficients at ``idx`` of ``P0``.
+
+    ``nodes``: the segment's columns where the node-wise functions are evaluated (smoothed or raw);
+    ``raw``: the measured columns the derivatives are taken of; ``ops``: the structure's operators.
+    """
+    k = len(idx)
+    B = 4 + k  # columns: 0 known part, 1-3 unit external forces, then one per coefficient
+    P = np.repeat(P0[:, None], B, axis=1)
+    for j, i in enumerate(idx):
+        P[i, 4 + j] = 1.0
+    ext = np.zeros((3, B))
+    ext[0, 1] = ext[1, 2] = ext[2, 3] = 1.0
+    A = accelerations(vessel, P, nodes["u"], nodes["v"], nodes["r"], nodes["delta"], nodes["n"], ext)
+    a0 = A[0]
+    Minv = np.stack([(A[c][0] - a0[0]) for c in (1, 2, 3)], axis=1)  # columns: response to unit X, Y, N
+    M = np.linalg.inv(Minv)
+    rates = ops.d(np.column_stack([raw[c] for c in STATE_RATES]), 1)
+    y = (rates - ops.value(a0)) @ M.T / scale
+    phi = np.stack([ops.value((A[4 + j] - a0) @ M.T / scale) for j in range(k)], axis=2)
+    return y, phi
 
 
 @dataclass
 class Regression:
-    """Per equation: regressor matrix, target, parameter names, truth values."""
+    """Per equation: regressor matrix, target, column names, truth values (when the columns are parameters)."""
 
     Phi: dict
     y: dict
@@ -36,65 +59,25 @@ class Regression:
     n_samples: int
 
 
-def force_scales(vessel: Vessel) -> np.ndarray:
-    p = vessel.cfg["particulars"]
-    q = 0.5 * float(p["rho"]) * float(p["Lpp"]) * float(p["d"]) * vessel.U0 ** 2
-    return np.array([q, q, q * float(p["Lpp"])])
+def build(vessel: Vessel, model, records, structure) -> Regression:
+    """Stack the (unprocessed) regression rows of every record for a model config and a structure name.
 
+    A convenience for tests and notebooks; the study's runs go through ``study.identify.fit``.
+    """
+    from .fit import regression_rows
+    from .models import make_model
+    from .structures import make_structure
 
-def check_model(vessel: Vessel, model: dict) -> None:
-    names = vessel.param_names
-    for eq, coefs in model["equations"].items():
-        if eq not in EQUATIONS:
-            raise ValueError(f"model '{model['name']}': unknown equation '{eq}', expected one of {EQUATIONS}")
-        bad = [c for c in coefs if c not in names]
-        if bad:
-            raise ValueError(f"model '{model['name']}': coefficients {bad} are not parameters of vessel kind "
-                             f"'{vessel.kind_name}' (known: {list(vessel.kind.PARAM_NAMES)})")
-    if model.get("kind") and model["kind"] != vessel.kind_name:
-        raise ValueError(f"model '{model['name']}' is for vessel kind '{model['kind']}', "
-                         f"but vessel '{vessel.name}' is of kind '{vessel.kind_name}'")
-
-
-def build(vessel: Vessel, model: dict, records, structure: str) -> Regression:
-    """Stack the regression of every record for the model's equations."""
-    check_model(vessel, model)
-    names = list(vessel.param_names)
-    coefs = [c for eq in EQUATIONS for c in model["equations"].get(eq, [])]
-    idx = [names.index(c) for c in coefs]
-    P0 = vessel.params.copy()
-    P0[idx] = 0.0
-    # columns: 0 known part, 1-3 unit external forces, then one per coefficient
-    B = 4 + len(coefs)
-    P = np.repeat(P0[:, None], B, axis=1)
-    for j, i in enumerate(idx):
-        P[i, 4 + j] = 1.0
-    ext = np.zeros((3, B))
-    ext[0, 1] = ext[1, 2] = ext[2, 3] = 1.0
-    scale = force_scales(vessel)
-    rows_phi, rows_y = [], []
-    fn = get_structure(structure)
-    for rec in records:
-        df = rec.data if hasattr(rec, "data") else rec
-        st, rates = fn(df)
-        A = accelerations(vessel, P, st["u"], st["v"], st["r"], st["delta"], st["n"], ext)
-        a0 = A[0]
-        Minv = np.stack([(A[k][0] - a0[0]) for k in (1, 2, 3)], axis=1)  # columns: response to unit X, Y, N
-        M = np.linalg.inv(Minv)
-        y = (rates - a0) @ M.T / scale  # (N, 3)
-        phi = np.stack([(A[4 + j] - a0) @ M.T / scale for j in range(len(coefs))], axis=2)  # (N, 3, k)
-        rows_phi.append(phi)
-        rows_y.append(y)
-    phi = np.concatenate(rows_phi)
-    y = np.concatenate(rows_y)
-    out = Regression({}, {}, {}, {}, int(y.shape[0]))
-    for e, eq in enumerate(EQUATIONS):
-        eq_coefs = model["equations"].get(eq, [])
-        if not eq_coefs:
-            continue
-        cols = [coefs.index(c) for c in eq_coefs]
-        out.Phi[eq] = phi[:, e, cols]
-        out.y[eq] = y[:, e]
-        out.names[eq] = list(eq_coefs)
-        out.truth[eq] = [float(vessel.params[names.index(c)]) for c in eq_coefs]
+    m = make_model(model, vessel)
+    skip, why = m.skip(None)
+    if skip:
+        raise ValueError(why)
+    s = make_structure(structure)
+    rows = regression_rows(m, s, records)
+    truth, _, _ = m.truth()
+    out = Regression({}, {}, {}, {}, 0)
+    for eq, (Phi, y, _seg) in rows.items():
+        out.Phi[eq], out.y[eq], out.names[eq] = Phi, y, list(m.equations[eq])
+        out.truth[eq] = [truth.get(c, np.nan) for c in m.equations[eq]]
+        out.n_samples = int(len(y))
     return out

@@ -1,48 +1,374 @@
-"""Sample structures: how a record's samples become (state, acceleration) pairs for regression.
+"""Sample structures: how measured records become the rows of a regression (or, for ``output_error``, how a
+model is compared with the records by simulating it).
 
-- ``euler``: forward difference a_k = (x_{k+1} - x_k)/h paired with the state at k (seed 000, eq. 14).
-- ``central``: central difference a_k = (x_{k+1} - x_{k-1})/(2h), state at k (seed 004, eqs. 14-17).
+A record is first cut into *segments* at its gaps (a time step above 1.5 times the median: dropouts), so
+records with missing samples stay usable. On one segment a structure gives the *operators* a model builds its
+rows from (``Ops``): ``value(F)`` (a node-wise quantity at the rows: the regressors) and ``d(X, p)`` (the p-th
+time derivative of a measured signal at the rows: the targets). A model equation ``D^p x = sum_i theta_i f_i``
+becomes the rows ``d(x, p) = sum_i theta_i value(f_i(nodes))``:
 
-Pairs that span a gap (a dropout: time step above 1.5 times the median) are left out, so records with
-missing samples stay usable. The next issue adds the differenced/centred, integral, smoothed and
-output-error structures to this registry.
+- ``euler``: forward differences, state at k (seed 000, Song et al. 2025, eq. 14); O(h) truncation error.
+- ``central``: central differences, state at k (seed 004, Zheng & Xiao 2017, eqs. 14-17); O(h^2). Written for
+  a non-uniform grid (the three-point formulas), so jittered time stamps stay exact to O(h^2).
+- ``integral``: the equation integrated over each sample interval by the trapezoidal rule: value =
+  (f_k + f_k+1)/2, d(x, 1) = (x_k+1 - x_k)/h (seed 003, Du et al. 2016, Sec. 3.2: inputs x_k + x_k+1, output
+  x_k+1 - x_k; the same rows divided by h so the coefficients keep their units). This is also the weak form of
+  SINDy with box test functions (Messenger & Bortz 2021). A second-order equation (Nomoto 2) is integrated
+  against a hat function over two intervals instead, so that again no derivative of the data is taken.
+- ``smoothed``: Savitzky-Golay (Savitzky & Golay 1964; ``scipy.signal.savgol_filter``): the regressors are
+  evaluated on the smoothed states, the derivatives are the filter's derivatives of the raw signals; the half
+  window at each end is dropped (the end fits are one-sided).
+- ``diff_center``: a base structure (``euler`` as in seed 000), then its rows differenced,
+  y_k - rho y_k-1 = (phi_k - rho phi_k-1) theta (seed 000 eqs. 15-17, rho = 1), then centred (eq. 18: every
+  column minus its mean over the training rows).
+- ``output_error``: no rows; the model is simulated through the records with their measured inputs (seed 004's
+  "integral" method; see ``study.identify.output_error``). Only estimators that simulate can use it.
+
+Every regression structure takes the seed-000 cleaning steps (eqs. 4-9), each selectable in its config
+(``clean:``): non-finite rows dropped, rows with a z-score above a limit in any column dropped, duplicated rows
+dropped, rows whose target is smaller than a threshold dropped, and a train/test split of the rows
+(``split:``). They act per equation on that equation's rows.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
+import pandas as pd
 
-STATE_COLS = ("u", "v", "r", "delta", "n")
-RATE_COLS = ("u", "v", "r")
-
-
-def _gap_mask(dt: np.ndarray) -> np.ndarray:
-    h = np.median(dt)
-    return dt <= 1.5 * h
+#: a time step above this many times the median starts a new segment (a dropout)
+GAP_FACTOR = 1.5
 
 
-def euler(df):
-    t = df["time"].to_numpy()
+@dataclass
+class Segment:
+    """A contiguous piece of one record: node times and the record's columns there."""
+
+    t: np.ndarray
+    data: dict
+    record: int
+
+
+def segments(df: pd.DataFrame, record: int, min_len: int = 3) -> list[Segment]:
+    """Cut a record at its gaps (time steps above ``GAP_FACTOR`` x the median step)."""
+    t = df["time"].to_numpy(float)
+    if len(t) < 2:
+        return []
     dt = np.diff(t)
-    ok = _gap_mask(dt)
-    states = {c: df[c].to_numpy()[:-1][ok] for c in STATE_COLS}
-    rates = np.column_stack([np.diff(df[c].to_numpy())[ok] / dt[ok] for c in RATE_COLS])
-    return states, rates
+    h = float(np.median(dt))
+    cuts = np.nonzero(dt > GAP_FACTOR * h)[0] + 1
+    out = []
+    for idx in np.split(np.arange(len(t)), cuts):
+        if len(idx) >= min_len:
+            out.append(Segment(t[idx], {c: df[c].to_numpy(float)[idx] for c in df.columns if c != "time"}, record))
+    return out
 
 
-def central(df):
-    t = df["time"].to_numpy()
-    dt = np.diff(t)
-    ok = _gap_mask(dt[:-1]) & _gap_mask(dt[1:])
-    span = t[2:] - t[:-2]
-    states = {c: df[c].to_numpy()[1:-1][ok] for c in STATE_COLS}
-    rates = np.column_stack([(df[c].to_numpy()[2:] - df[c].to_numpy()[:-2])[ok] / span[ok] for c in RATE_COLS])
-    return states, rates
+class Ops:
+    """Row operators of one segment (see the module docstring). ``times`` are the rows' times."""
+
+    def __init__(self, t: np.ndarray, rows: np.ndarray):
+        self.t = t
+        self.rows = rows
+
+    @property
+    def times(self) -> np.ndarray:
+        return self.t[self.rows]
+
+    def __len__(self) -> int:
+        return len(self.rows)
+
+    def value(self, F):
+        raise NotImplementedError
+
+    def d(self, X, p: int):
+        raise NotImplementedError
 
 
-STRUCTURES = {"euler": euler, "central": central}
+def _h(t):
+    return np.diff(t)
 
 
-def get_structure(name: str):
-    if name not in STRUCTURES:
-        raise ValueError(f"unknown sample structure '{name}'; known: {sorted(STRUCTURES)}")
-    return STRUCTURES[name]
+def _d1_nodes(X: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """First derivative at the interior nodes 1..n-2 by the three-point formula on a non-uniform grid."""
+    h1 = (t[1:-1] - t[:-2]).reshape((-1,) + (1,) * (X.ndim - 1))
+    h2 = (t[2:] - t[1:-1]).reshape(h1.shape)
+    return (h1 * h1 * X[2:] - h2 * h2 * X[:-2] - (h1 * h1 - h2 * h2) * X[1:-1]) / (h1 * h2 * (h1 + h2))
+
+
+def _d2_nodes(X: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Second derivative at the interior nodes 1..n-2 (three-point, non-uniform)."""
+    h1 = (t[1:-1] - t[:-2]).reshape((-1,) + (1,) * (X.ndim - 1))
+    h2 = (t[2:] - t[1:-1]).reshape(h1.shape)
+    return 2.0 * (h1 * X[2:] - (h1 + h2) * X[1:-1] + h2 * X[:-2]) / (h1 * h2 * (h1 + h2))
+
+
+class EulerOps(Ops):
+    def __init__(self, t, order):
+        super().__init__(t, np.arange(0, len(t) - order))
+        self.order = order
+
+    def value(self, F):
+        return np.asarray(F)[self.rows]
+
+    def d(self, X, p):
+        X = np.asarray(X)
+        m = len(self.rows)
+        h = _h(self.t).reshape((-1,) + (1,) * (X.ndim - 1))
+        if p == 1:
+            return (X[1:m + 1] - X[:m]) / h[:m]
+        if p == 2:
+            h1, h2 = h[:m], h[1:m + 1]
+            return 2.0 * ((X[2:m + 2] - X[1:m + 1]) / h2 - (X[1:m + 1] - X[:m]) / h1) / (h1 + h2)
+        raise ValueError(f"euler: derivative order {p} not supported (1 or 2)")
+
+
+class CentralOps(Ops):
+    def __init__(self, t, order):
+        if order > 2:
+            raise ValueError(f"central: derivative order {order} not supported (1 or 2)")
+        super().__init__(t, np.arange(1, len(t) - 1))
+
+    def value(self, F):
+        return np.asarray(F)[self.rows]
+
+    def d(self, X, p):
+        X = np.asarray(X)
+        if p == 1:
+            return _d1_nodes(X, self.t)
+        if p == 2:
+            return _d2_nodes(X, self.t)
+        raise ValueError(f"central: derivative order {p} not supported (1 or 2)")
+
+
+class IntegralOps(Ops):
+    """Rows = the equation integrated against a test function, so that no derivative of a measured signal is
+    taken. Order 1: a box over [t_k, t_k+1] (seed 003's trapezoidal rows). Order 2: a hat over
+    [t_k-1, t_k+1] (peak 1 at t_k); integrating by parts puts both derivatives on the hat,
+    int(hat x'') = x_k+1/h2 - x_k (1/h1 + 1/h2) + x_k-1/h1, and int(hat f) is exact for piecewise-linear f:
+    (h1 f_k-1 + 2 (h1 + h2) f_k + h2 f_k+1) / 6. Rows are divided by the test function's integral, so the
+    coefficients keep their units (the weak form of Messenger & Bortz 2021 with the simplest test functions).
+    """
+
+    def __init__(self, t, order):
+        if order > 2:
+            raise ValueError(f"integral: derivative order {order} not supported (1 or 2)")
+        n = len(t)
+        self.order = order
+        k = np.arange(0, n - 1) if order == 1 else np.arange(1, n - 1)
+        super().__init__(t, k)
+
+    @property
+    def times(self):
+        if self.order == 1:
+            return 0.5 * (self.t[self.rows] + self.t[self.rows + 1])
+        return self.t[self.rows]
+
+    def _h12(self, ndim):
+        k = self.rows
+        shape = (-1,) + (1,) * (ndim - 1)
+        return (self.t[k] - self.t[k - 1]).reshape(shape), (self.t[k + 1] - self.t[k]).reshape(shape)
+
+    def value(self, F):
+        F = np.asarray(F)
+        k = self.rows
+        if self.order == 1:
+            return 0.5 * (F[k] + F[k + 1])
+        h1, h2 = self._h12(F.ndim)
+        return (h1 * F[k - 1] + 2.0 * (h1 + h2) * F[k] + h2 * F[k + 1]) / (3.0 * (h1 + h2))
+
+    def d(self, X, p):
+        X = np.asarray(X)
+        k = self.rows
+        if self.order == 1:
+            if p != 1:
+                raise ValueError("integral: a first-order row has no second derivative")
+            h = (self.t[k + 1] - self.t[k]).reshape((-1,) + (1,) * (X.ndim - 1))
+            return (X[k + 1] - X[k]) / h
+        h1, h2 = self._h12(X.ndim)
+        if p == 1:  # int(hat x') = -int(hat' x) = (mean of x right - mean of x left), trapezoidal
+            return (X[k + 1] - X[k - 1]) / (h1 + h2)
+        if p == 2:
+            return 2.0 * (X[k + 1] / h2 - X[k] * (1.0 / h1 + 1.0 / h2) + X[k - 1] / h1) / (h1 + h2)
+        raise ValueError(f"integral: derivative order {p} not supported (1 or 2)")
+
+
+class SavGolOps(Ops):
+    def __init__(self, t, window: int, polyorder: int):
+        n = len(t)
+        half = window // 2
+        super().__init__(t, np.arange(half, n - half))
+        self.window = window
+        self.polyorder = polyorder
+        self.h = float(np.median(np.diff(t)))
+
+    def value(self, F):
+        return np.asarray(F)[self.rows]
+
+    def d(self, X, p):
+        from scipy.signal import savgol_filter
+
+        if p > self.polyorder:
+            raise ValueError(f"smoothed: derivative order {p} needs polyorder >= {p}, got {self.polyorder}")
+        return savgol_filter(np.asarray(X, float), self.window, self.polyorder, deriv=p, delta=self.h,
+                             axis=0)[self.rows]
+
+
+# ------------------------------------------------------------------------------------------- structures
+
+@dataclass
+class Structure:
+    """A sample structure built from its config (``conf/structure/<name>.yaml``)."""
+
+    name: str
+    kind: str = "central"  # euler | central | integral | smoothed | output_error (diff_center: kind of base)
+    simulates: bool = False
+    base: str | None = None
+    difference: dict | None = None  # {rho: 1.0}
+    center: bool = False
+    clean: dict = field(default_factory=dict)
+    split: dict = field(default_factory=dict)
+    smoothing: dict = field(default_factory=dict)
+    output_error: dict = field(default_factory=dict)
+    source: str = ""
+
+    # -- segments and operators
+    def min_nodes(self, order: int) -> int:
+        if self.kind == "smoothed":
+            return self.window_samples(None) + 2
+        return order + 3
+
+    def window_samples(self, t: np.ndarray | None) -> int:
+        sm = self.smoothing or {}
+        if sm.get("window_s") is not None and t is not None:
+            h = float(np.median(np.diff(t)))
+            w = int(round(float(sm["window_s"]) / h))
+        else:
+            w = int(sm.get("window", 11))
+        w = max(w, int(sm.get("polyorder", 3)) + 2)
+        return w + 1 - w % 2  # odd
+
+    def ops(self, seg: Segment, order: int) -> Ops:
+        t = seg.t
+        if self.kind == "euler":
+            return EulerOps(t, order)
+        if self.kind == "central":
+            return CentralOps(t, order)
+        if self.kind == "integral":
+            return IntegralOps(t, order)
+        if self.kind == "smoothed":
+            dt = np.diff(t)
+            h = float(np.median(dt))
+            if np.max(np.abs(dt - h)) > 0.05 * h:
+                raise ValueError(f"structure 'smoothed': Savitzky-Golay needs a uniform time step; a segment of "
+                                 f"record {seg.record} has steps from {dt.min():.4g} to {dt.max():.4g} s "
+                                 "(resample it first)")
+            return SavGolOps(t, self.window_samples(t), int((self.smoothing or {}).get("polyorder", 3)))
+        raise ValueError(f"structure '{self.name}' ({self.kind}) builds no regression rows")
+
+    def nodes(self, seg: Segment) -> dict:
+        """Node values for the model's node-wise functions: the raw samples, or smoothed ones."""
+        if self.kind != "smoothed":
+            return seg.data
+        from scipy.signal import savgol_filter
+
+        w = self.window_samples(seg.t)
+        p = int((self.smoothing or {}).get("polyorder", 3))
+        return {c: savgol_filter(a, w, p, axis=0) for c, a in seg.data.items()}
+
+    # -- rows after the model built them (per equation)
+    def postprocess(self, Phi: np.ndarray, y: np.ndarray, seg_id: np.ndarray, seed: int = 0):
+        """Differencing, cleaning, split and centring (each as configured). Returns a dict of arrays:
+        ``Phi, y`` (training rows), ``Phi_test, y_test`` (held-out rows, maybe empty), ``report`` (counts)."""
+        report = {"rows_built": int(len(y))}
+        if self.difference:
+            rho = float(self.difference.get("rho", 1.0))
+            same = seg_id[1:] == seg_id[:-1]  # consecutive rows of one segment only
+            Phi = (Phi[1:] - rho * Phi[:-1])[same]
+            y = (y[1:] - rho * y[:-1])[same]
+            seg_id = seg_id[1:][same]
+        keep = np.ones(len(y), dtype=bool)
+        c = self.clean or {}
+        if c.get("missing", True):
+            keep &= np.all(np.isfinite(Phi), axis=1) & np.isfinite(y)
+        report["rows_nonfinite"] = int((~keep).sum())
+        if c.get("zscore") is not None:
+            Z = np.column_stack([Phi, y])
+            mu = np.nanmean(Z[keep], axis=0)
+            sd = np.nanstd(Z[keep], axis=0)
+            sd[sd == 0] = 1.0
+            out = np.any(np.abs((Z - mu) / sd) > float(c["zscore"]), axis=1)
+            report["rows_zscore"] = int((out & keep).sum())
+            keep &= ~out
+        if c.get("duplicates"):
+            Z = np.column_stack([Phi, y])
+            _, first = np.unique(Z, axis=0, return_index=True)
+            dup = np.ones(len(y), dtype=bool)
+            dup[first] = False
+            report["rows_duplicate"] = int((dup & keep).sum())
+            keep &= ~dup
+        if c.get("min_abs") is not None:
+            # seed 000 eq. 8, |z_i| >= Lambda, read as a threshold on the target relative to its spread
+            small = np.abs(y) < float(c["min_abs"]) * np.std(y[keep])
+            report["rows_small"] = int((small & keep).sum())
+            keep &= ~small
+        Phi, y = Phi[keep], y[keep]
+        s = self.split or {}
+        frac = float(s.get("train_fraction", 1.0))
+        test = np.zeros(len(y), dtype=bool)
+        if frac < 1.0:
+            n_test = int(round((1.0 - frac) * len(y)))
+            if s.get("how", "random") == "tail":
+                test[len(y) - n_test:] = True
+            else:
+                rng = np.random.default_rng(int(s.get("seed", seed)))
+                test[rng.choice(len(y), n_test, replace=False)] = True
+        Pt, yt, Pv, yv = Phi[~test], y[~test], Phi[test], y[test]
+        if self.center:
+            mx, my = Pt.mean(axis=0), yt.mean()
+            Pt, yt = Pt - mx, yt - my
+            Pv, yv = Pv - mx, yv - my
+        report["rows_train"] = int(len(yt))
+        report["rows_test"] = int(len(yv))
+        return {"Phi": Pt, "y": yt, "Phi_test": Pv, "y_test": yv, "report": report}
+
+
+STRUCTURE_KINDS = ("euler", "central", "integral", "smoothed", "output_error")
+
+
+def make_structure(cfg) -> Structure:
+    """A :class:`Structure` from its config dict (or config name)."""
+    if isinstance(cfg, str):
+        from ..sim import read_config
+
+        cfg = read_config("structure", cfg)
+    cfg = dict(cfg)
+    name = cfg.get("name")
+    kind = cfg.get("kind", name if name in STRUCTURE_KINDS else None)
+    base = cfg.get("base")
+    if base is not None:
+        kind = base
+    if kind not in STRUCTURE_KINDS:
+        raise ValueError(f"structure '{name}': unknown kind '{kind}'; expected one of {STRUCTURE_KINDS} "
+                         "(or a 'base' structure with 'difference'/'center')")
+    known = {"name", "kind", "base", "difference", "center", "clean", "split", "smoothing", "output_error",
+             "source"}
+    extra = sorted(set(cfg) - known)
+    if extra:
+        raise ValueError(f"structure '{name}': unknown key(s) {extra}; known: {sorted(known)}")
+    return Structure(name=name, kind=kind, simulates=kind == "output_error", base=base,
+                     difference=cfg.get("difference"), center=bool(cfg.get("center", False)),
+                     clean=dict(cfg.get("clean") or {}), split=dict(cfg.get("split") or {}),
+                     smoothing=dict(cfg.get("smoothing") or {}), output_error=dict(cfg.get("output_error") or {}),
+                     source=str(cfg.get("source", "")))
+
+
+def list_structures() -> list[str]:
+    from ..sim import list_configs
+
+    return list_configs("structure")
+
+
+def get_structure(name: str) -> Structure:  # kept for older callers
+    return make_structure(name)
+

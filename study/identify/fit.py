@@ -1,0 +1,257 @@
+"""Identify a model from records: the regression or the output-error problem, the estimator, and the
+per-parameter and multicollinearity results of one run.
+
+``identify(model, structure, estimator_cfg, records)`` is what a study run (``study.pipeline``) and the model
+doctor call; it returns an :class:`Identification` (estimates in the model's physical parameters, parameter
+rows for the results table, scalar metrics, artefact files).
+"""
+from __future__ import annotations
+
+import inspect
+import json
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from .collinearity import collinearity
+from .estimators import make_estimator
+from .structures import segments
+
+#: interval reported from posterior draws (emcee): the central 90 %
+INTERVAL = (0.05, 0.95)
+#: a candidate column this correlated with a model column (or an earlier candidate) is a duplicate
+DUPLICATE_CORR = 0.999999
+
+
+@dataclass
+class Identification:
+    estimates: dict  # physical name -> value
+    params: list  # rows for the results table
+    metrics: dict
+    artefacts: dict = field(default_factory=dict)
+    timings: dict = field(default_factory=dict)
+
+
+def regression_rows(model, structure, records, candidates: int | None = None):
+    """Per equation ``(Phi, y, segment id)`` stacked over every segment of every record, before the structure's
+    post-processing; with ``candidates`` (a degree) the model's extra candidate columns are appended (their
+    names in ``model.candidate_names_``)."""
+    acc: dict = {}
+    cand_names = None
+    sid = 0
+    for i, rec in enumerate(records):
+        df = rec.data if hasattr(rec, "data") else rec
+        for seg in segments(df, i, min_len=structure.min_nodes(model.order)):
+            rows = model.rows(seg, structure)
+            if candidates:
+                cand_names, C = model.candidates(seg, structure, int(candidates))
+            for eq, r in rows.items():
+                Phi = np.column_stack([r.Phi, C]) if candidates else r.Phi
+                acc.setdefault(eq, []).append((Phi, r.y, np.full(len(r.y), sid)))
+            sid += 1
+    if not acc:
+        raise ValueError(f"no regression rows: every record is shorter than the {structure.min_nodes(model.order)} "
+                         f"samples structure '{structure.name}' needs for model '{model.name}'")
+    model.candidate_names_ = cand_names or []
+    return {eq: tuple(np.concatenate([p[j] for p in parts]) for j in range(3)) for eq, parts in acc.items()}
+
+
+def _drop_duplicate_candidates(Phi: np.ndarray, n_model: int, names: list) -> tuple[np.ndarray, list]:
+    """Drop candidate columns (after the first ``n_model``) that duplicate a model term or each other."""
+    keep = list(range(n_model))
+    sd = Phi.std(axis=0)
+    for j in range(n_model, Phi.shape[1]):
+        if sd[j] == 0 or not np.all(np.isfinite(Phi[:, j])):
+            continue
+        dup = False
+        for i in keep:
+            if sd[i] > 0 and abs(np.corrcoef(Phi[:, i], Phi[:, j])[0, 1]) > DUPLICATE_CORR:
+                dup = True
+                break
+        if not dup:
+            keep.append(j)
+    return Phi[:, keep], [names[j] for j in keep]
+
+
+def _csv_bytes(df: pd.DataFrame) -> bytes:
+    return df.to_csv(index=False, float_format="%.10g").encode("utf-8")
+
+
+def _fit_kwargs(fn, progress: bool) -> dict:
+    return {"progress": progress} if "progress" in inspect.signature(fn).parameters else {}
+
+
+@dataclass
+class Prepared:
+    """One equation's regression after the structure's processing: training rows ``X`` (DataFrame, columns =
+    model terms then candidate terms), ``y``; held-out rows; the processing report; multicollinearity of the
+    model terms."""
+
+    X: pd.DataFrame
+    y: np.ndarray
+    X_test: np.ndarray
+    y_test: np.ndarray
+    report: dict
+    n_model: int
+    collinearity: dict
+
+
+def prepare(model, structure, records, candidates: int | None = None, seed: int = 0) -> dict:
+    """Per equation the :class:`Prepared` regression of ``model`` on ``records`` with ``structure``."""
+    rows = regression_rows(model, structure, records, candidates=candidates)
+    out = {}
+    for eq, (Phi, y, seg) in rows.items():
+        names = list(model.equations[eq])
+        n_model = len(names)
+        if candidates:
+            Phi, names = _drop_duplicate_candidates(Phi, n_model, names + model.candidate_names_)
+        post = structure.postprocess(Phi, y, seg, seed=seed)
+        if len(post["y"]) < len(names):
+            raise ValueError(f"equation {eq}: {len(post['y'])} rows after structure '{structure.name}' for "
+                             f"{len(names)} unknowns")
+        out[eq] = Prepared(pd.DataFrame(post["Phi"], columns=names), post["y"], post["Phi_test"], post["y_test"],
+                           post["report"], n_model, collinearity(post["Phi"][:, :n_model]))
+    return out
+
+
+def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, progress: bool = False) -> Identification:
+    """Identify ``model`` from ``records`` with the structure and the estimator config (see module doc)."""
+    timings: dict = {}
+    metrics: dict = {}
+    artefacts: dict = {}
+    truth, truth_how, exact = model.truth()
+    truth_kind = "exact" if exact else truth_how.split(":")[0]
+    coef_rows = []  # (equation, column name, estimate, extras)
+    samples = {}  # column name -> posterior draws
+    if structure.simulates:
+        from .output_error import make_problem
+
+        t0 = time.perf_counter()
+        problem = make_problem(model, structure, records, seed=seed)
+        timings["regressors"] = time.perf_counter() - t0
+        est = make_estimator(estimator_cfg)
+        t0 = time.perf_counter()
+        est.fit_output_error(problem, **_fit_kwargs(est.fit_output_error, progress))
+        timings["fit"] = time.perf_counter() - t0
+        metrics.update({f"oe_{k}": v for k, v in problem.summary(est.coef_).items()})
+        metrics.update({f"est_{k}": v for k, v in (est.diagnostics_ or {}).items()})
+        for name, a in (est.artefacts_ or {}).items():
+            artefacts[name if "." in name else f"{name}.csv"] = a if isinstance(a, bytes) else _csv_bytes(a)
+        physical = dict(zip(problem.model_names, (float(c) for c in est.coef_[:problem.k_model])))
+        eq_of = {n: eq for eq, names in model.physical_names.items() for n in names}
+        for j, n in enumerate(problem.model_names):
+            coef_rows.append((eq_of[n], n, physical[n], _intervals(est, j)))
+        metrics["oe_initial_states"] = len(problem.init_params)
+    else:
+        cand = (estimator_cfg.get("extra_candidates") or {}).get("degree")
+        t0 = time.perf_counter()
+        prepared = prepare(model, structure, records, candidates=cand, seed=seed)
+        timings["regressors"] = time.perf_counter() - t0
+        coefs, fit_time = {}, 0.0
+        collin = {}
+        for eq, pr in prepared.items():
+            names = list(pr.X.columns)
+            n_model = pr.n_model
+            for k, v in pr.report.items():
+                metrics[f"{k}_{eq}"] = v
+            c = pr.collinearity
+            collin[eq] = {"names": names[:n_model], "corr": c["corr"].tolist(), "vif": c["vif"].tolist(),
+                          "cond_corr": c["cond_corr"], "cond_scaled": c["cond_scaled"]}
+            metrics.update({f"cond_{eq}": c["cond_scaled"], f"cond_corr_{eq}": c["cond_corr"],
+                            f"vif_max_{eq}": float(np.nanmax(c["vif"])) if np.isfinite(c["vif"]).any() else
+                            float("nan"), f"corr_max_{eq}": c["corr_max"]})
+            X = pr.X
+            post = {"y": pr.y, "Phi_test": pr.X_test, "y_test": pr.y_test}
+            est = make_estimator(estimator_cfg)
+            t0 = time.perf_counter()
+            est.fit(X, post["y"], **_fit_kwargs(est.fit, progress))
+            fit_time += time.perf_counter() - t0
+            coef = np.asarray(est.coef_, float).ravel()
+            resid = post["y"] - X.to_numpy() @ coef - getattr(est, "intercept_", 0.0)
+            metrics[f"fit_rmse_{eq}"] = float(np.sqrt(np.mean(resid ** 2)))
+            sy = float(np.std(post["y"]))
+            metrics[f"fit_r2_{eq}"] = float(1.0 - np.mean(resid ** 2) / sy ** 2) if sy > 0 else float("nan")
+            if len(post["y_test"]):
+                rt = post["y_test"] - post["Phi_test"] @ coef - getattr(est, "intercept_", 0.0)
+                metrics[f"test_rmse_{eq}"] = float(np.sqrt(np.mean(rt ** 2)))
+            metrics[f"est_{eq}_intercept"] = float(getattr(est, "intercept_", 0.0))
+            for k, v in (est.diagnostics_ or {}).items():
+                if np.isscalar(v):
+                    metrics[f"est_{eq}_{k}"] = v if isinstance(v, str) else float(v)
+            for aname, a in (est.artefacts_ or {}).items():
+                if isinstance(a, pd.DataFrame):
+                    artefacts[f"{eq}/{aname}.csv"] = _csv_bytes(a)
+                elif isinstance(a, bytes):
+                    artefacts[f"{eq}/{aname}"] = a
+            sel = getattr(est, "selected_", None)
+            for j, n in enumerate(names):
+                extra = _intervals(est, j)
+                extra["vif"] = float(c["vif"][j]) if j < n_model else None
+                if sel is not None:
+                    extra["selected"] = float(bool(sel[j]))
+                coefs[n] = float(coef[j])
+                coef_rows.append((eq, n, float(coef[j]), extra))
+            if getattr(est, "samples_", None) is not None:
+                for j, n in enumerate(names):
+                    samples[n] = est.samples_[:, j]
+        timings["fit"] = fit_time
+        artefacts["collinearity.json"] = json.dumps(collin, allow_nan=True).encode("utf-8")
+        physical = model.physical({n: v for n, v in coefs.items() if n in _all(model.equations)})
+        if model.type == "nomoto":  # report the physical parameters, keep the regression ones as metrics
+            for eq, n, v, _ in coef_rows:
+                metrics[f"coef_{eq}_{n}"] = v
+            phys_samples = model.physical(samples) if samples else {}
+            coef_rows = [("N", n, physical[n], _sample_intervals(phys_samples.get(n)))
+                         for n in model.physical_names["N"]]
+    # parameter rows with truth and drift
+    params = []
+    for eq, n, v, extra in coef_rows:
+        t = truth.get(n)
+        kind = truth_kind if n in truth else "candidate (not in the truth model)"
+        params.append({"equation": eq, "name": n, "estimate": _num(v), "truth": _num(t if t is not None else 0.0),
+                       "truth_kind": kind, **{k: _num(x) for k, x in extra.items()}})
+    rel = [abs(p["estimate"] - p["truth"]) / abs(p["truth"]) for p in params
+           if p["truth"] and p["name"] in truth and p["estimate"] is not None]
+    metrics["drift_median"] = float(np.median(rel)) if rel else float("nan")
+    metrics["drift_max"] = float(np.max(rel)) if rel else float("nan")
+    metrics["drift_mean"] = float(np.mean(rel)) if rel else float("nan")
+    metrics["truth_exact"] = float(bool(exact))
+    metrics["n_params"] = len([p for p in params if p["name"] in truth])
+    estimates = {p["name"]: p["estimate"] for p in params if p["name"] in truth}
+    return Identification(estimates, params, metrics, artefacts, timings)
+
+
+def _all(eqs: dict) -> set:
+    return {n for names in eqs.values() for n in names}
+
+
+def _num(x):
+    if x is None:
+        return None
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+def _intervals(est, j: int) -> dict:
+    out = {}
+    ci = getattr(est, "coef_interval_", None)
+    if ci is not None:
+        out["ci_low"], out["ci_high"] = float(ci[j][0]), float(ci[j][1])
+    sd = getattr(est, "coef_std_", None)
+    if sd is not None:
+        out["std"] = float(sd[j])
+    return out
+
+
+def _sample_intervals(draws) -> dict:
+    if draws is None:
+        return {}
+    d = np.asarray(draws, float)
+    d = d[np.isfinite(d)]
+    if d.size < 10:
+        return {}
+    lo, hi = np.quantile(d, INTERVAL)
+    return {"ci_low": float(lo), "ci_high": float(hi), "std": float(np.std(d))}
+

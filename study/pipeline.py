@@ -120,6 +120,12 @@ def run_study(conf: dict) -> dict:
 
     # validation: the identified model (depth known, environment unknown) against the truth
     t0 = time.perf_counter()
+    bad = sorted(k for k, v in ident.estimates.items() if v is None or not np.isfinite(v))
+    if bad:  # e.g. Nomoto T1, T2 of a complex pole pair, or T = -1/0 when a selector dropped r
+        metrics["val_skipped"] = 1.0
+        metrics["val_skipped_reason"] = f"no finite estimate of {bad}: the identified model cannot be simulated"
+        timings["validate"] = time.perf_counter() - t0
+        return {"metrics": metrics, "params": ident.params, "timings": timings, "artefacts": artefacts}
     model_vessel = model.model_vessel(ident.estimates)
     truth_val = simulate_set(truth, mans["validate"], conf, seed_base=1000 * seed + 500)
     pred_val = simulate_set(model_vessel, mans["validate"], conf, seed_base=1000 * seed + 500)

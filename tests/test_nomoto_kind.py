@@ -7,7 +7,6 @@ Abkowitz Mariner. The first call of a kind compiles its integrator (a few second
 """
 import copy
 import math
-import time
 import warnings
 
 import numpy as np
@@ -400,12 +399,3 @@ def test_nomoto_truth():
     assert m["T"] == pytest.approx(T1 + T2 - T3, rel=0.01) and m["alpha"] == pytest.approx(ALPHA, rel=0.01)
     with pytest.raises(ValueError, match="order"):
         nomoto_truth(load_vessel("mariner"), order=3, nonlinear=False)
-
-
-def test_linearize_is_fast():
-    v = load_vessel("kvlcc2")
-    nomoto_truth(v, 2, True)  # compile / warm up
-    t0 = time.perf_counter()
-    for name in ("kvlcc2", "mariner"):
-        nomoto_truth(load_vessel(name), 2, True)
-    assert (time.perf_counter() - t0) / 2 < 1.0

@@ -21,8 +21,9 @@ from .structures import segments
 
 #: interval reported from posterior draws (emcee): the central 90 %
 INTERVAL = (0.05, 0.95)
-#: a candidate column this correlated with a model column (or an earlier candidate) is a duplicate
-DUPLICATE_CORR = 0.999999
+#: a candidate column explained by the columns kept before it up to this fraction of its sum of squares
+#: (uncentred R^2 > 1 - gap) is dropped from SINDy's library as indistinguishable
+CANDIDATE_R2_GAP = 1e-3
 
 
 @dataclass
@@ -59,18 +60,19 @@ def regression_rows(model, structure, records, candidates: int | None = None):
 
 
 def _drop_duplicate_candidates(Phi: np.ndarray, n_model: int, names: list) -> tuple[np.ndarray, list]:
-    """Drop candidate columns (after the first ``n_model``) that duplicate a model term or each other."""
+    """Drop candidate columns (after the first ``n_model``) that the columns kept so far explain to
+    ``R^2 > 1 - CANDIDATE_R2_GAP`` by least squares: such a term cannot be told from the model's own terms
+    (e.g. the AUV's u v and the candidate (U/U0)^2 v' = U v / U0^2 differ only through the small drift), and a
+    sparse regression would split the coefficient between the two arbitrarily."""
     keep = list(range(n_model))
-    sd = Phi.std(axis=0)
     for j in range(n_model, Phi.shape[1]):
-        if sd[j] == 0 or not np.all(np.isfinite(Phi[:, j])):
+        c = Phi[:, j]
+        if not np.all(np.isfinite(c)) or not np.any(c):
             continue
-        dup = False
-        for i in keep:
-            if sd[i] > 0 and abs(np.corrcoef(Phi[:, i], Phi[:, j])[0, 1]) > DUPLICATE_CORR:
-                dup = True
-                break
-        if not dup:
+        A = Phi[:, keep]
+        coef, *_ = np.linalg.lstsq(A, c, rcond=None)
+        resid = c - A @ coef
+        if np.sum(resid ** 2) > CANDIDATE_R2_GAP * np.sum(c ** 2):
             keep.append(j)
     return Phi[:, keep], [names[j] for j in keep]
 

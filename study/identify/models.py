@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..sim import Vessel, accelerations, read_config
+from ..sim import Vessel, read_config
 
 EQUATIONS = ("X", "Y", "N")
 

@@ -20,7 +20,7 @@ spread. Walkers start in a small ball around the least-squares / Gauss-Newton op
 
 Run length: chunks of ``check_every`` steps until the effective sample size (walkers x kept steps / the largest
 integrated autocorrelation time, emcee's estimator) reaches ``target_ess`` and the chain is longer than
-``50 tau`` (emcee's guidance), or ``max_steps``. The first half of the chain is discarded as burn-in.
+``min_tau_multiple`` x tau (50 by default, emcee's guidance), or ``max_steps``. The first half of the chain is discarded as burn-in.
 Recorded: acceptance fraction, tau, ESS, steps, whether the stopping rule was met; the thinned chain is saved
 (``chain.npz``); the parameter table gets the posterior median, sd and the central ``interval`` credible interval.
 """
@@ -54,6 +54,8 @@ class EmceeSampler(Estimator):
     seed : int
     max_saved : int
         Draws kept in ``samples_`` and in the saved chain at most (thinned evenly).
+    min_tau_multiple : float
+        The chain must be longer than this many autocorrelation times (emcee's guidance: 50).
     init : str
         Output error: where the walkers start. 'local' a Gauss-Newton fit from the problem's initial estimate;
         'de' differential evolution over the box first (global: a KT model's likelihood has distant local
@@ -64,7 +66,7 @@ class EmceeSampler(Estimator):
 
     def __init__(self, n_walkers: int | None = None, target_ess: int = 1000, max_steps: int = 20000,
                  check_every: int = 250, min_steps: int = 500, prior_scale: float = 10.0, interval: float = 0.9,
-                 seed: int = 0, max_saved: int = 20000, init: str = "auto"):
+                 seed: int = 0, max_saved: int = 20000, min_tau_multiple: float = 50.0, init: str = "auto"):
         self.n_walkers = n_walkers
         self.target_ess = target_ess
         self.max_steps = max_steps
@@ -74,6 +76,7 @@ class EmceeSampler(Estimator):
         self.interval = interval
         self.seed = seed
         self.max_saved = max_saved
+        self.min_tau_multiple = min_tau_multiple
         self.init = init
 
     # ----------------------------------------------------------------------------------------- sampling
@@ -108,7 +111,7 @@ class EmceeSampler(Estimator):
                 ess = nw * kept / float(np.max(tau))
                 if bar is not None:
                     bar.set_postfix(ess=f"{ess:.0f}", tau=f"{np.max(tau):.0f}")
-                if ess >= self.target_ess and steps > 50 * float(np.max(tau)):
+                if ess >= self.target_ess and steps > self.min_tau_multiple * float(np.max(tau)):
                     converged = True
                     break
         finally:

@@ -6,6 +6,7 @@ records a failure without stopping the sweep, and writes the record atomically),
 """
 from __future__ import annotations
 
+import json
 import logging
 from pathlib import Path
 
@@ -36,6 +37,38 @@ class CollectResults(Callback):
 
     def on_multirun_end(self, config: DictConfig, **kwargs) -> None:
         self._collect(config)
+
+
+class SweepProgress(Callback):
+    """One line per finished job of a sweep: its number, status and time, and how many runs the results folder
+    holds by status (Hydra itself lists the jobs when it launches them). Works with any launcher: the line is
+    printed by the job's own process."""
+
+    def on_job_end(self, config: DictConfig, job_return, **kwargs) -> None:
+        from hydra.core.hydra_config import HydraConfig
+
+        try:
+            hc = HydraConfig.get()
+            if hc.mode is None or str(hc.mode) != "RunMode.MULTIRUN":
+                return
+            num = hc.job.num
+        except ValueError:
+            return
+        rec = job_return.return_value if job_return is not None and job_return.status.name == "COMPLETED" else None
+        status = rec.get("status", "?") if isinstance(rec, dict) else "error"
+        wall = (rec.get("timings") or {}).get("wall") if isinstance(rec, dict) else None
+        root = _results_dir(config) / "records"
+        counts = {}
+        for f in root.glob("*.json") if root.is_dir() else []:
+            try:
+                st = json.loads(f.read_text(encoding="utf-8")).get("status", "?")
+            except (OSError, ValueError):
+                continue
+            counts[st] = counts.get(st, 0) + 1
+        took = f", {wall:.1f} s" if isinstance(wall, (int, float)) else ""
+        resumed = " (resumed)" if isinstance(rec, dict) and rec.get("resumed") else ""
+        print(f"[study] job #{num}: {status}{resumed}{took}; results folder: "
+              + ", ".join(f"{v} {k}" for k, v in sorted(counts.items())), flush=True)
 
 
 @hydra.main(config_path=CONF_DIR, config_name="config", version_base="1.3")

@@ -15,7 +15,7 @@ from . import maneuvers as man_mod
 from .measure import MeasurementModel
 from .metrics import prediction_metrics, standard_metrics
 from .sim import default_dt, load_vessel, simulate
-from .sim.effects import ShallowWater
+from .sim.effects import NotApplicable, ShallowWater
 
 
 def resolve_effects(effects: list, U0: float) -> list[dict]:
@@ -44,10 +44,15 @@ def vessels_for(conf: dict):
     return truth, base
 
 
+def _level(x):
+    """A noise level: one fraction for every channel, or a dict channel -> fraction."""
+    return {k: float(v) for k, v in x.items()} if isinstance(x, dict) else float(x or 0.0)
+
+
 def measurement(conf: dict, seed: int) -> MeasurementModel:
     nz = dict(conf.get("noise") or {})
     return MeasurementModel(
-        dt=nz.get("sample_dt"), noise_level=float(nz.get("level", 0.0)), bias=nz.get("bias") or {},
+        dt=nz.get("sample_dt"), noise_level=_level(nz.get("level", 0.0)), bias=nz.get("bias") or {},
         colored=nz.get("colored"), outliers=nz.get("outliers"), dropouts=nz.get("dropouts"), seed=seed,
     )
 
@@ -61,6 +66,16 @@ def simulate_set(vessel, names, conf, seed_base):
         T = man.duration_for(vessel) * float(sim.get("duration_scale", 1.0))
         out[name] = simulate(vessel, man, dt=dt, duration=T, seed=seed_base + i)
     return out
+
+
+def estimator_config(conf: dict) -> dict:
+    """The run's estimator config with the study's ``estimator_overrides[<name>]`` merged into its params (a
+    sweep over estimators can shorten, say, emcee's chains without touching the others)."""
+    cfg = dict(conf["estimator"])
+    over = (conf.get("estimator_overrides") or {}).get(cfg.get("name")) or {}
+    if over:
+        cfg["params"] = {**(cfg.get("params") or {}), **over}
+    return cfg
 
 
 def _skip_reason(model, structure, estimator) -> str | None:
@@ -84,6 +99,47 @@ def _trace_bytes(meas, pred, channels, max_rows: int = 600) -> bytes:
     return pd.DataFrame(out).to_csv(index=False, float_format="%.7g").encode("utf-8")
 
 
+def _predictive_band(model, draws: dict, maneuver: str, meas, conf, seed, max_rows: int = 600):
+    """The posterior-predictive band of one validation manoeuvre: every draw simulated in one batch call
+    (each closing its own controller), the 5 %, 50 % and 95 % quantiles of each predicted channel, as CSV.
+    None when no draw can be simulated."""
+    from .sim import simulate_batch
+
+    names = list(draws)
+    n = len(draws[names[0]])
+    vessels = []
+    for i in range(n):
+        d = {k: float(draws[k][i]) for k in names}
+        if all(np.isfinite(list(d.values()))):
+            try:
+                vessels.append(model.model_vessel(d))
+            except ValueError:  # e.g. a draw with a negative time constant the model cannot take
+                continue
+    if not vessels:
+        return None
+    P = np.column_stack([v.params for v in vessels])
+    man = man_mod.get_maneuver(maneuver)
+    sim = conf.get("sim") or {}
+    T = man.duration_for(vessels[0]) * float(sim.get("duration_scale", 1.0))
+    t, out = simulate_batch(vessels[0], man, P, dt=sim.get("dt") or default_dt(vessels[0]), duration=T,
+                            seed=1000 * seed + 500)
+    step = max(1, int(np.ceil(len(t) / max_rows)))
+    cols = {"time": t[::step]}
+    from .sim.core import OUT_NAMES
+
+    tm = meas["time"].to_numpy()
+    for c in model.channels:
+        Y = out[::step, OUT_NAMES.index(c), :]
+        ok = np.all(np.isfinite(Y), axis=0)
+        if not ok.any():
+            return None
+        q = np.quantile(Y[:, ok], [0.05, 0.5, 0.95], axis=1)
+        cols[f"truth_{c}"] = np.interp(t[::step], tm, meas[c].to_numpy())
+        cols[f"q05_{c}"], cols[f"q50_{c}"], cols[f"q95_{c}"] = q
+    cols["draws"] = np.full(len(cols["time"]), int(len(vessels)))
+    return pd.DataFrame(cols).to_csv(index=False, float_format="%.7g").encode("utf-8")
+
+
 def run_study(conf: dict) -> dict:
     """Run one configuration; returns ``{'metrics', 'params', 'timings', 'artefacts'}`` or a skipped result
     ``{'status': 'skipped', 'error': reason}`` for a combination that makes no sense (see study.results)."""
@@ -94,10 +150,14 @@ def run_study(conf: dict) -> dict:
 
     timings = {}
     seed = int(conf.get("seed", 0))
-    truth, base = vessels_for(conf)
+    try:
+        truth, base = vessels_for(conf)
+    except NotApplicable as e:  # e.g. shallow water on a Nomoto model: nothing for the effect to act on
+        return {"status": "skipped", "error": str(e), "metrics": {}, "params": [], "timings": {}}
     model = make_model(conf["model"], base)
     structure = make_structure(conf["structure"])
-    estimator = make_estimator(conf["estimator"])
+    est_cfg = estimator_config(conf)
+    estimator = make_estimator(est_cfg)
     why = _skip_reason(model, structure, estimator)
     if why:
         return {"status": "skipped", "error": why, "metrics": {}, "params": [], "timings": {}}
@@ -112,7 +172,7 @@ def run_study(conf: dict) -> dict:
         records.append(measurement(conf, seed=seed * 7919 + i).apply(df))
     timings["measure"] = time.perf_counter() - t0
 
-    ident = identify(model, structure, conf["estimator"], records, seed=seed,
+    ident = identify(model, structure, est_cfg, records, seed=seed,
                      progress=bool(conf.get("progress", False)))
     timings.update(ident.timings)
     metrics = {"n_samples": int(sum(len(r) for r in records)), **ident.metrics}
@@ -150,5 +210,9 @@ def run_study(conf: dict) -> dict:
                 pass  # a metric the record cannot carry (e.g. too short) is simply absent
         if keep_traces:
             artefacts[f"validation/{name}.csv"] = _trace_bytes(meas, pred, chans)
+        if ident.draws and keep_traces:
+            band = _predictive_band(model, ident.draws, name, meas, conf, seed)
+            if band is not None:
+                artefacts[f"validation/{name}_band.csv"] = band
     timings["validate"] = time.perf_counter() - t0
     return {"metrics": metrics, "params": ident.params, "timings": timings, "artefacts": artefacts}

@@ -32,8 +32,8 @@ def test_every_option_composes(group, option):
         assert conf[group]["name"] == option
 
 
-def _smoke_conf(tmp_path, **over):
-    overrides = ["experiment=smoke"] + [f"{k}={v}" for k, v in over.items()]
+def _tiny_conf(tmp_path, **over):
+    overrides = ["experiment=tiny"] + [f"{k}={v}" for k, v in over.items()]
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         cfg = compose(config_name="config", overrides=overrides)
     conf = OmegaConf.to_container(cfg, resolve=False)
@@ -42,7 +42,7 @@ def _smoke_conf(tmp_path, **over):
 
 
 def test_default_pipeline_identifies_and_validates(tmp_path):
-    conf = _smoke_conf(tmp_path, **{"noise": "none"})
+    conf = _tiny_conf(tmp_path, **{"noise": "none"})
     out = run_study(conf)
     assert len(out["params"]) == 17
     assert out["metrics"]["drift_median"] < 0.01
@@ -61,7 +61,7 @@ def _records(results):
 
 def test_two_process_sweep_resume_and_failure(tmp_path):
     results = tmp_path / "results"
-    sweep = ["-m", "hydra/launcher=local", "hydra.launcher.n_jobs=2", "experiment=smoke", "noise=none,low",
+    sweep = ["-m", "hydra/launcher=local", "hydra.launcher.n_jobs=2", "experiment=tiny", "noise=none,low",
              "structure=euler,central"]
     p = _run_app(sweep, results)
     assert p.returncode == 0, p.stderr[-3000:]
@@ -77,7 +77,7 @@ def test_two_process_sweep_resume_and_failure(tmp_path):
     assert p.stdout.count("resumed") == 3
     assert len(_records(results)) == 4
     # a failing run (h/T below every formula's range) is recorded, and the sweep goes on
-    p = _run_app(["-m", "experiment=smoke", "noise=none", "depth.h_T=1.0,2.0"], results)
+    p = _run_app(["-m", "experiment=tiny", "noise=none", "depth.h_T=1.0,2.0"], results)
     assert p.returncode == 0, p.stderr[-3000:]
     recs = _records(results)
     failed = [r for r in recs.values() if r["status"] == "failed"]
@@ -89,8 +89,8 @@ def test_experiment_overrides_the_primary_config():
     # the experiment comes after _self_ in the defaults list, so its values win
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         base = compose(config_name="config")
-        smoke = compose(config_name="config", overrides=["experiment=smoke"])
-    assert base.sim.duration_scale == 1.0 and smoke.sim.duration_scale < 1.0
+        tiny = compose(config_name="config", overrides=["experiment=tiny"])
+    assert base.sim.duration_scale == 1.0 and tiny.sim.duration_scale < 1.0
 
 
 @pytest.mark.parametrize("environment", _options("environment"))
@@ -98,7 +98,7 @@ def test_hidden_effects_flow_through_a_run(tmp_path, environment):
     """Every environment option runs end to end. Current and wind act on the hull equations and bias the
     estimates; a slow steering gear does not, because the record holds the actual rudder angle, not the
     command (only a model driven by the command would see it)."""
-    out = run_study(_smoke_conf(tmp_path, noise="none", environment=environment, depth="h_T_2p9"))
+    out = run_study(_tiny_conf(tmp_path, noise="none", environment=environment, depth="h_T_2p9"))
     drift = out["metrics"]["drift_median"]
     if environment in ("calm", "rudder_lag"):
         assert drift < 0.01

@@ -1,7 +1,7 @@
 """Every estimator runs from the app's configuration and lands in the results table; nonsense is skipped.
 
 Each estimator config is composed with Hydra exactly as ``python -m study estimator=<e> structure=<s>
-model=nomoto1_nl vessel=kt1_mariner experiment=smoke`` would, run through the results store, and the tables
+model=nomoto1_nl vessel=kt1_mariner experiment=tiny`` would, run through the results store, and the tables
 are rebuilt: the run is 'ok', its parameter rows carry estimate and truth (and intervals for emcee), its
 metrics the multicollinearity and fit time. A regression estimator on ``output_error`` and a model of the wrong
 vessel kind are recorded as 'skipped' with the reason, not raised.
@@ -24,7 +24,7 @@ FAST = {"emcee": ["estimator.params.target_ess=150", "estimator.params.min_tau_m
 
 def _conf(tmp_path, overrides):
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-        cfg = compose(config_name="config", overrides=["experiment=smoke", "noise=low", *overrides])
+        cfg = compose(config_name="config", overrides=["experiment=tiny", "noise=low", *overrides])
     conf = OmegaConf.to_container(cfg, resolve=True)
     conf["results_dir"] = str(tmp_path)
     return conf

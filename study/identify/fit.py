@@ -21,6 +21,8 @@ from .structures import segments
 
 #: interval reported from posterior draws (emcee): the central 90 %
 INTERVAL = (0.05, 0.95)
+#: posterior draws kept for the posterior-predictive bands of the validation manoeuvres
+MAX_DRAWS = 200
 #: a candidate column explained by the columns kept before it up to this fraction of its sum of squares
 #: (uncentred R^2 > 1 - gap) is dropped from SINDy's library as indistinguishable
 CANDIDATE_R2_GAP = 1e-3
@@ -33,6 +35,7 @@ class Identification:
     metrics: dict
     artefacts: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
+    draws: dict = field(default_factory=dict)  # physical name -> posterior draws (emcee), at most MAX_DRAWS
 
 
 def regression_rows(model, structure, records, candidates: int | None = None):
@@ -45,6 +48,7 @@ def regression_rows(model, structure, records, candidates: int | None = None):
     for i, rec in enumerate(records):
         df = rec.data if hasattr(rec, "data") else rec
         for seg in segments(df, i, min_len=structure.min_nodes(model.order)):
+            seg = structure.measured(seg)
             rows = model.rows(seg, structure)
             if candidates:
                 cand_names, C = model.candidates(seg, structure, int(candidates))
@@ -146,6 +150,9 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
         for j, n in enumerate(problem.model_names):
             coef_rows.append((eq_of[n], n, physical[n], _intervals(est, j)))
         metrics["oe_initial_states"] = len(problem.init_params)
+        if getattr(est, "samples_", None) is not None:
+            for j, n in enumerate(problem.model_names):
+                samples[n] = est.samples_[:, j]
     else:
         cand = (estimator_cfg.get("extra_candidates") or {}).get("degree")
         t0 = time.perf_counter()
@@ -222,7 +229,15 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
     metrics["truth_exact"] = float(bool(exact))
     metrics["n_params"] = len([p for p in params if p["name"] in truth])
     estimates = {p["name"]: p["estimate"] for p in params if p["name"] in truth}
-    return Identification(estimates, params, metrics, artefacts, timings)
+    draws = {}
+    if samples:
+        phys = samples if structure.simulates or model.type != "nomoto" else model.physical(samples)
+        names = [n for n in estimates if n in phys]
+        if len(names) == len(estimates):
+            m = min(len(np.asarray(phys[n])) for n in names)
+            idx = np.unique(np.linspace(0, m - 1, min(MAX_DRAWS, m)).astype(int))
+            draws = {n: np.asarray(phys[n], float)[idx] for n in names}
+    return Identification(estimates, params, metrics, artefacts, timings, draws)
 
 
 def _all(eqs: dict) -> set:

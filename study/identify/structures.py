@@ -27,7 +27,8 @@ becomes the rows ``d(x, p) = sum_i theta_i value(f_i(nodes))``:
 Every regression structure takes the seed-000 cleaning steps (eqs. 4-9), each selectable in its config
 (``clean:``): non-finite rows dropped, rows with a z-score above a limit in any column dropped, duplicated rows
 dropped, rows whose target is smaller than a threshold dropped, and a train/test split of the rows
-(``split:``). They act per equation on that equation's rows.
+(``split:``); ``select: {n_rows: k}`` keeps k evenly spaced training rows (seed 003 uses 100 of 600). They act
+per equation on that equation's rows.
 """
 from __future__ import annotations
 
@@ -230,6 +231,8 @@ class Structure:
     split: dict = field(default_factory=dict)
     smoothing: dict = field(default_factory=dict)
     output_error: dict = field(default_factory=dict)
+    select: dict = field(default_factory=dict)  # {n_rows: k}: k evenly spaced training rows (seed 003: 100)
+    rate_from_heading: bool = False  # r replaced by the central difference of psi (seed 004 eq. 14)
     source: str = ""
 
     # -- segments and operators
@@ -265,6 +268,19 @@ class Structure:
                                  "(resample it first)")
             return SavGolOps(t, self.window_samples(t), int((self.smoothing or {}).get("polyorder", 3)))
         raise ValueError(f"structure '{self.name}' ({self.kind}) builds no regression rows")
+
+    def measured(self, seg: Segment) -> Segment:
+        """The segment as the rows see it: with ``rate_from_heading`` the yaw rate is the three-point central
+        difference of the heading (seed 004 eq. 14: r, r', r'' all from psi, as when no gyro is logged)."""
+        if not self.rate_from_heading:
+            return seg
+        data = dict(seg.data)
+        r = np.empty_like(data["psi"])
+        r[1:-1] = _d1_nodes(data["psi"], seg.t)
+        r[0] = (data["psi"][1] - data["psi"][0]) / (seg.t[1] - seg.t[0])
+        r[-1] = (data["psi"][-1] - data["psi"][-2]) / (seg.t[-1] - seg.t[-2])
+        data["r"] = r
+        return Segment(seg.t, data, seg.record)
 
     def nodes(self, seg: Segment) -> dict:
         """Node values for the model's node-wise functions: the raw samples, or smoothed ones."""
@@ -324,6 +340,11 @@ class Structure:
                 rng = np.random.default_rng(int(s.get("seed", seed)))
                 test[rng.choice(len(y), n_test, replace=False)] = True
         Pt, yt, Pv, yv = Phi[~test], y[~test], Phi[test], y[test]
+        n_sel = (self.select or {}).get("n_rows")
+        if n_sel and int(n_sel) < len(yt):  # seed 003 Sec. 3.3: 100 equally spaced pairs of the 600
+            idx = np.unique(np.round(np.linspace(0, len(yt) - 1, int(n_sel))).astype(int))
+            Pt, yt = Pt[idx], yt[idx]
+            report["rows_selected"] = int(len(idx))
         if self.center:
             mx, my = Pt.mean(axis=0), yt.mean()
             Pt, yt = Pt - mx, yt - my
@@ -352,7 +373,7 @@ def make_structure(cfg) -> Structure:
         raise ValueError(f"structure '{name}': unknown kind '{kind}'; expected one of {STRUCTURE_KINDS} "
                          "(or a 'base' structure with 'difference'/'center')")
     known = {"name", "kind", "base", "difference", "center", "clean", "split", "smoothing", "output_error",
-             "source"}
+             "source", "select", "rate_from_heading"}
     extra = sorted(set(cfg) - known)
     if extra:
         raise ValueError(f"structure '{name}': unknown key(s) {extra}; known: {sorted(known)}")
@@ -360,6 +381,7 @@ def make_structure(cfg) -> Structure:
                      difference=cfg.get("difference"), center=bool(cfg.get("center", False)),
                      clean=dict(cfg.get("clean") or {}), split=dict(cfg.get("split") or {}),
                      smoothing=dict(cfg.get("smoothing") or {}), output_error=dict(cfg.get("output_error") or {}),
+                     select=dict(cfg.get("select") or {}), rate_from_heading=bool(cfg.get("rate_from_heading")),
                      source=str(cfg.get("source", "")))
 
 

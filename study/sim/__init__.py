@@ -220,6 +220,28 @@ def simulate(vessel, maneuver, effects=(), dt: float | None = None, sample_dt: f
     return to_frame(out, t)
 
 
+def simulate_batch(vessel: Vessel, maneuver, P: np.ndarray, dt: float | None = None,
+                   duration: float | None = None, seed: int = 0):
+    """One manoeuvre for every column of the parameter matrix ``P`` (n_params, B) in one compiled call, each
+    member closing its own zigzag/turning controller on its own heading (e.g. posterior draws of a model).
+
+    Returns ``(t, out)`` with ``out`` of shape (n, 8, B) in the order of ``study.sim.core.OUT_NAMES``; the
+    propeller runs at ``vessel.n0`` for every member.
+    """
+    from .. import maneuvers
+
+    man = maneuvers.get_maneuver(maneuver)
+    dt = default_dt(vessel) if dt is None else float(dt)
+    T = man.duration_for(vessel) if duration is None else float(duration)
+    nsteps = int(round(T / dt))
+    ctrl, cmd = man.encode(vessel, dt, nsteps, seed=seed)
+    nprop = np.full(nsteps + 1, vessel.n0)
+    P = np.ascontiguousarray(P, dtype=np.float64)
+    y0 = _aux_at_rest(vessel, P, np.repeat(initial_state(vessel)[:, None], P.shape[1], axis=1), cmd[0])
+    out = run(vessel, P, y0, dt, nsteps, cmd, nprop, ctrl, 1)
+    return np.arange(out.shape[0]) * dt, out
+
+
 def replay(vessel: Vessel, time: np.ndarray, delta: np.ndarray, n: np.ndarray, state0, P=None,
            substeps: int = 1) -> np.ndarray:
     """Simulate with measured inputs (open loop) on a record's uniform time base.

@@ -18,6 +18,10 @@ import numpy as np
 from .core import ENV_NAMES
 
 
+class NotApplicable(ValueError):
+    """An effect that cannot act on this vessel (a study records the run as skipped, with this message)."""
+
+
 def default_env(vessel_cfg: dict) -> dict:
     """Environment/actuator block with no environment and the vessel's own steering gear."""
     act = vessel_cfg.get("actuator", {}) or {}
@@ -213,7 +217,7 @@ class ShallowWater:
         H = 1.0 / float(self.h_T)
         sec, names = kind.COEFF_SECTION, kind.LINEAR_DERIVATIVES
         if not names:  # e.g. a Nomoto model: no hull derivatives (as Wind raises without a windage block)
-            raise ValueError(f"shallow_water: vessel '{vessel_cfg.get('name')}' is of kind '{vessel_cfg['kind']}', "
+            raise NotApplicable(f"shallow_water: vessel '{vessel_cfg.get('name')}' is of kind '{vessel_cfg['kind']}', "
                              "which has no hull derivatives for the depth factors to act on (its "
                              "LINEAR_DERIVATIVES is empty); use deep water (h_T = null) or a hull-based kind")
         for generic, key in names.items():

@@ -1,0 +1,93 @@
+"""CI runs the ``smoke`` study and rebuilds the figures from its table: every estimator on a regression
+structure and on output error lands in the table (regression estimators skipped on output error, with the
+reason); ``python -m study.figures`` rebuilds the outputs twice, byte for byte the same, with CLAIMS.md and a
+README listing each output; a killed sweep resumes without recomputing finished runs."""
+import filecmp
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _env(results):
+    return dict(os.environ, STUDY_RESULTS_DIR=str(results), OPENBLAS_NUM_THREADS="1")
+
+
+@pytest.fixture(scope="module")
+def smoke(tmp_path_factory):
+    root = tmp_path_factory.mktemp("smoke")
+    results = root / "results"
+    p = subprocess.run([sys.executable, "-m", "study", "-m", "experiment=smoke", "hydra/launcher=local",
+                        "progress=false"], cwd=root, env=_env(results), capture_output=True, text=True, timeout=900)
+    assert p.returncode == 0, p.stderr[-3000:]
+    return root, results, p
+
+
+def test_smoke_study_runs_everything(smoke):
+    root, results, p = smoke
+    runs = pd.read_parquet(results / "runs.parquet")
+    assert (runs["cfg_study"] == "smoke").all()
+    assert set(runs["status"]) <= {"ok", "skipped"}, runs.loc[runs.status == "failed", "error"].tolist()
+    ok = runs[runs.status == "ok"]
+    assert set(ok["cfg_estimator.name"]) == {"ls", "ridge", "lasso", "lssvm", "tlssvm", "lssvm_online", "svr_eps",
+                                             "svr_nu", "sindy", "de", "emcee"}
+    skipped = runs[runs.status == "skipped"]
+    assert len(skipped) and skipped["error"].str.contains("output error").all()
+    assert set(ok.loc[ok["cfg_structure.name"] == "output_error", "cfg_estimator.name"]) == {"de", "emcee"}
+    assert "[study] job #" in p.stdout  # the sweep shows its progress
+
+
+def test_figures_rebuild_byte_stable(smoke, tmp_path):
+    root, results, _ = smoke
+    outs = []
+    for k in range(2):
+        out = tmp_path / f"figs{k}"
+        p = subprocess.run([sys.executable, "-m", "study.figures", "--results", str(results), "--out", str(out)],
+                           cwd=root, capture_output=True, text=True, timeout=600)
+        assert p.returncode == 0, p.stderr[-3000:]
+        outs.append(out)
+    files = sorted(str(f.relative_to(outs[0])) for f in outs[0].rglob("*") if f.is_file())
+    files2 = sorted(str(f.relative_to(outs[1])) for f in outs[1].rglob("*") if f.is_file())
+    assert files == files2
+    _, mismatch, errors = filecmp.cmpfiles(outs[0], outs[1], files, shallow=False)
+    assert not mismatch and not errors, mismatch + errors
+    names = {Path(f).stem for f in files}
+    for expected in ("fit_time", "lcurve", "online_convergence", "corner", "correlation_matrices", "condition_numbers",
+                     "rmse_cc", "vif"):
+        assert expected in names, (expected, sorted(names))
+    assert any(n.startswith("drift_heatmap") for n in names) and any(n.startswith("validation_") for n in names)
+    assert any(n.startswith("posterior_band") for n in names)
+    for ext in (".png", ".pdf", ".csv", ".md"):
+        assert any(f.endswith(ext) for f in files)
+    readme = (outs[0] / "README.md").read_text()
+    assert "smoke/fit_time.{png,pdf}" in readme
+    assert "seed000_svr_mmg" in readme  # studies not run are listed as such
+    assert (outs[0] / "CLAIMS.md").read_text().count("not run") >= 4
+
+
+def test_killed_sweep_resumes_without_recomputing(smoke):
+    """Lose three records (as a sweep killed half way would not have written them) and run the study again:
+    exactly those three are computed, the others resume."""
+    root, results, _ = smoke
+    recs = sorted((results / "records").glob("*.json"))
+    ok = [r for r in recs if json.loads(r.read_text())["status"] == "ok"][:3]
+    for r in ok:
+        r.unlink()
+    p = subprocess.run([sys.executable, "-m", "study", "-m", "experiment=smoke", "hydra/launcher=local",
+                        "progress=false"], cwd=root, env=_env(results), capture_output=True, text=True, timeout=900)
+    assert p.returncode == 0, p.stderr[-3000:]
+    out = p.stdout + p.stderr
+    assert out.count("(already finished, resumed)") == len(recs) - 3
+    assert len(list((results / "records").glob("*.json"))) == len(recs)
+
+
+def test_figures_without_a_table_is_a_clear_error(tmp_path):
+    p = subprocess.run([sys.executable, "-m", "study.figures", "--results", str(tmp_path / "nothing"), "--out",
+                        str(tmp_path / "figs")], capture_output=True, text=True, timeout=120)
+    assert p.returncode == 2 and "no results table" in p.stderr

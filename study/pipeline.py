@@ -144,7 +144,7 @@ def run_study(conf: dict) -> dict:
     """Run one configuration; returns ``{'metrics', 'params', 'timings', 'artefacts'}`` or a skipped result
     ``{'status': 'skipped', 'error': reason}`` for a combination that makes no sense (see study.results)."""
     from .identify.estimators import make_estimator
-    from .identify.fit import identify
+    from .identify.fit import Identification, identify
     from .identify.models import make_model
     from .identify.structures import make_structure
 
@@ -172,8 +172,25 @@ def run_study(conf: dict) -> dict:
         records.append(measurement(conf, seed=seed * 7919 + i).apply(df))
     timings["measure"] = time.perf_counter() - t0
 
-    ident = identify(model, structure, est_cfg, records, seed=seed,
-                     progress=bool(conf.get("progress", False)))
+    if (conf["model"].get("effects") or []):
+        # a model with effects (model.effects=[current, ...]): identified by the doctor's variable projection
+        from .doctor.fit import identify_in_study
+
+        if model.type != "kind" or structure.simulates:
+            return {"status": "skipped", "error": "model.effects need a force model (type: kind) and a regression "
+                    "structure", "metrics": {}, "params": [], "timings": {}}
+        t0 = time.perf_counter()
+        res = identify_in_study(base, conf["model"], records, conf["structure"], truth)
+        timings["fit"] = time.perf_counter() - t0
+        metrics = {"n_samples": int(sum(len(r) for r in records)), **res["metrics"]}
+        rel = [abs(p["estimate"] - p["truth"]) / abs(p["truth"]) for p in res["params"] if p["truth"]]
+        metrics["drift_median"] = float(np.median(rel)) if rel else float("nan")
+        ident = Identification(res["estimates"], res["params"], metrics, {}, {})
+        model_vessel_override = res["vessel"]
+    else:
+        ident = identify(model, structure, est_cfg, records, seed=seed,
+                         progress=bool(conf.get("progress", False)))
+        model_vessel_override = None
     timings.update(ident.timings)
     metrics = {"n_samples": int(sum(len(r) for r in records)), **ident.metrics}
     artefacts = dict(ident.artefacts)
@@ -186,7 +203,7 @@ def run_study(conf: dict) -> dict:
         metrics["val_skipped_reason"] = f"no finite estimate of {bad}: the identified model cannot be simulated"
         timings["validate"] = time.perf_counter() - t0
         return {"metrics": metrics, "params": ident.params, "timings": timings, "artefacts": artefacts}
-    model_vessel = model.model_vessel(ident.estimates)
+    model_vessel = model_vessel_override or model.model_vessel(ident.estimates)
     truth_val = simulate_set(truth, mans["validate"], conf, seed_base=1000 * seed + 500)
     pred_val = simulate_set(model_vessel, mans["validate"], conf, seed_base=1000 * seed + 500)
     L = truth.L

@@ -9,6 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import hydra
+import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from .app import CONF_DIR
@@ -29,6 +30,13 @@ def make_record(conf: dict):
     seed = int(conf.get("seed", 0))
     clean = simulate(truth, man, dt=dt, duration=T, seed=seed)
     df = measurement(conf, seed=seed).apply(clean)
+    log = conf.get("rudder_log", "both")
+    if log not in ("both", "actual", "command"):
+        raise ValueError(f"rudder_log={log!r}: expected 'both', 'actual' or 'command'")
+    if log == "command":  # the measured 'delta' of an autopilot log is what the steering gear was told
+        df["delta"] = np.interp(df["time"], clean["time"], clean["delta_cmd"])
+    if log != "both":
+        df = df.drop(columns=["delta_cmd"])
     meta = {
         "name": f"{truth.name}_{man.name}",
         "source": "simulated by study.simulate",
@@ -40,6 +48,7 @@ def make_record(conf: dict):
         "seed": seed,
         "dt": dt,
         "n0": truth.n0,
+        "rudder_log": log,
     }
     return Record(data=df.reset_index(drop=True), meta=meta)
 

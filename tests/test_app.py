@@ -74,7 +74,7 @@ def test_two_process_sweep_resume_and_failure(tmp_path):
     (results / "records" / f"{lost}.json").unlink()
     p = _run_app(sweep, results)
     assert p.returncode == 0, p.stderr[-3000:]
-    assert p.stdout.count("resumed") == 3
+    assert p.stdout.count("(already finished, resumed)") == 3
     assert len(_records(results)) == 4
     # a failing run (h/T below every formula's range) is recorded, and the sweep goes on
     p = _run_app(["-m", "experiment=tiny", "noise=none", "depth.h_T=1.0,2.0"], results)

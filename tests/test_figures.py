@@ -1,9 +1,8 @@
 """CI runs the ``smoke`` study and rebuilds the figures from its table: every estimator on a regression
 structure and on output error lands in the table (regression estimators skipped on output error, with the
 reason); ``python -m study.figures`` rebuilds the outputs twice, byte for byte the same, with CLAIMS.md and a
-README listing each output; a killed sweep resumes without recomputing finished runs."""
+README listing each output. (A killed sweep resuming without recomputing: tests/test_app.py.)"""
 import filecmp
-import json
 import os
 import subprocess
 import sys
@@ -69,22 +68,6 @@ def test_figures_rebuild_byte_stable(smoke, tmp_path):
     assert "smoke/fit_time.{png,pdf}" in readme
     assert "seed000_svr_mmg" in readme  # studies not run are listed as such
     assert (outs[0] / "CLAIMS.md").read_text().count("not run") >= 4
-
-
-def test_killed_sweep_resumes_without_recomputing(smoke):
-    """Lose three records (as a sweep killed half way would not have written them) and run the study again:
-    exactly those three are computed, the others resume."""
-    root, results, _ = smoke
-    recs = sorted((results / "records").glob("*.json"))
-    ok = [r for r in recs if json.loads(r.read_text())["status"] == "ok"][:3]
-    for r in ok:
-        r.unlink()
-    p = subprocess.run([sys.executable, "-m", "study", "-m", "experiment=smoke", "hydra/launcher=local",
-                        "progress=false"], cwd=root, env=_env(results), capture_output=True, text=True, timeout=900)
-    assert p.returncode == 0, p.stderr[-3000:]
-    out = p.stdout + p.stderr
-    assert out.count("(already finished, resumed)") == len(recs) - 3
-    assert len(list((results / "records").glob("*.json"))) == len(recs)
 
 
 def test_figures_without_a_table_is_a_clear_error(tmp_path):

@@ -205,7 +205,7 @@ def test_batch_of_64_equals_one_at_a_time():
     got = run(v, P, y0, dt, nsteps, cmd, nprop, ctrl)
     assert np.isfinite(got).all()
     assert np.ptp(got[-1, 3]) > 100.0 and np.ptp(got[-1, 5]) > 0.1  # the members differ
-    scale = np.array([v.U0, v.U0, v.U0 / v.L, v.L, v.L, 1.0, 1.0, 1.0])[None, :, None]
+    scale = np.array([v.U0, v.U0, v.U0 / v.L, v.L, v.L, 1.0, 1.0, 1.0, 1.0])[None, :, None]
 
     def close(a, b):
         return np.max(np.abs(a - b) / np.maximum(np.abs(b), scale))

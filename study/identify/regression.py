@@ -44,6 +44,8 @@ def kind_regressors(vessel: Vessel, P0: np.ndarray, idx: list, nodes: dict, raw:
     M = np.linalg.inv(Minv)
     rates = ops.d(np.column_stack([raw[c] for c in STATE_RATES]), 1)
     y = (rates - ops.value(a0)) @ M.T / scale
+    if not k:  # a known model: nothing to identify, the rows are the residual forces
+        return y, np.zeros(y.shape + (0,))
     phi = np.stack([ops.value((A[4 + j] - a0) @ M.T / scale) for j in range(k)], axis=2)
     return y, phi
 

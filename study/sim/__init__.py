@@ -141,7 +141,7 @@ def default_dt(vessel: Vessel) -> float:
 
 def run(vessel: Vessel, P: np.ndarray, y0: np.ndarray, dt: float, nsteps: int, cmd: np.ndarray,
         nprop: np.ndarray, ctrl: np.ndarray, save_every: int = 1) -> np.ndarray:
-    """Low-level batch call: P (n_params, B), y0 (6, B) -> output (n_out, 8, B)."""
+    """Low-level batch call: P (n_params, B), y0 (6, B) -> output (n_out, 9, B), columns ``OUT_NAMES``."""
     P = np.ascontiguousarray(P, dtype=np.float64)
     if P.ndim == 1:
         P = P[:, None]
@@ -225,7 +225,7 @@ def simulate_batch(vessel: Vessel, maneuver, P: np.ndarray, dt: float | None = N
     """One manoeuvre for every column of the parameter matrix ``P`` (n_params, B) in one compiled call, each
     member closing its own zigzag/turning controller on its own heading (e.g. posterior draws of a model).
 
-    Returns ``(t, out)`` with ``out`` of shape (n, 8, B) in the order of ``study.sim.core.OUT_NAMES``; the
+    Returns ``(t, out)`` with ``out`` of shape (n, 9, B) in the order of ``study.sim.core.OUT_NAMES``; the
     propeller runs at ``vessel.n0`` for every member.
     """
     from .. import maneuvers
@@ -247,7 +247,7 @@ def replay(vessel: Vessel, time: np.ndarray, delta: np.ndarray, n: np.ndarray, s
     """Simulate with measured inputs (open loop) on a record's uniform time base.
 
     ``delta`` is applied as the rudder command: with the vessel's rudder rate, lag and delay (set them to 0
-    to apply the measured angle directly). ``state0`` = [u_w, v_w, r, x0, y0, psi]. Returns (n, 8, B).
+    to apply the measured angle directly). ``state0`` = [u_w, v_w, r, x0, y0, psi]. Returns (n, 9, B).
     For a kind whose ``v_w`` slot is not a sway velocity (``KINEMATIC_SWAY = False``: ``nomoto``) the given
     v_w is ignored: the slot starts at the kind's auxiliary state at rest (r' = 0) for the first rudder angle
     (a record's ``v`` is the drift over ground, not that state).
@@ -267,6 +267,46 @@ def replay(vessel: Vessel, time: np.ndarray, delta: np.ndarray, n: np.ndarray, s
     P = vessel.params if P is None else P
     state0 = _aux_at_rest(vessel, P, np.asarray(state0, float), cmd[0])
     return run(vessel, P, state0, dt, nsteps, cmd, nprop, open_loop_ctrl(), substeps)
+
+
+@lru_cache(maxsize=1)
+def _wind_kernel():
+    from numba import njit
+
+    from .core import _wind_forces
+
+    # not cached on disk: it inlines core._wind_forces, whose changes numba's cache would not notice
+    @njit(cache=False, error_model="numpy")
+    def kernel(u_w, v_w, psi, Vw, wdir, P, k0, out):
+        # one member, the wind speed and direction per sample (the compiled integrator's own force function)
+        Q = P.copy()
+        ccd = math.cos(P[k0 + 1, 0])
+        scd = math.sin(P[k0 + 1, 0])
+        for i in range(u_w.shape[0]):
+            Q[k0 + 2, 0] = Vw[i]
+            cp = math.cos(psi[i])
+            sp = math.sin(psi[i])
+            fx, fy, fn = _wind_forces(u_w[i], v_w[i], cp, sp, Q, k0, 0, ccd, scd, math.cos(wdir[i]),
+                                      math.sin(wdir[i]))
+            out[i, 0] = fx
+            out[i, 1] = fy
+            out[i, 2] = fn
+
+    return kernel
+
+
+def wind_forces(vessel: Vessel, u_w, v_w, psi, speed, direction) -> np.ndarray:
+    """Wind forces [N, N, N m] in body axes, (N, 3), of ``vessel``'s windage and wind coefficients for a true
+    wind of ``speed`` [m/s] from ``direction`` [rad] (scalars or per-sample arrays), the ship moving at the
+    water-relative ``u_w, v_w`` with heading ``psi`` (and the vessel's current, if any) -- the same compiled
+    function the integrator uses (Fossen 2011, Sec. 8.1)."""
+    n = len(np.asarray(u_w))
+    arr = [np.ascontiguousarray(np.broadcast_to(np.asarray(a, float), (n,))) for a in (u_w, v_w, psi, speed,
+                                                                                       direction)]
+    out = np.empty((n, 3))
+    P = np.ascontiguousarray(vessel.params[:, None], dtype=np.float64)
+    _wind_kernel()(*arr, P, len(vessel.kind.PARAM_NAMES), out)
+    return out
 
 
 @lru_cache(maxsize=None)

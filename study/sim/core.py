@@ -13,6 +13,7 @@ may differ in any of them; that is what DE populations and emcee walkers need.
 
 State carried by the integrator: ``u_w, v_w`` (velocities relative to the water), ``r``, ``x0, y0``, ``psi``.
 Output columns (``OUT_NAMES``): ``u, v`` over ground (what GNSS measures), ``r``, ``x0``, ``y0``, ``psi``,
+``delta`` (the actual rudder angle), ``n``, ``delta_cmd`` (the steering gear's command),
 ``delta`` (actual rudder angle), ``n``.
 
 A kind whose model has no sway velocity (``study.sim.nomoto``: a yaw response model) declares
@@ -48,7 +49,7 @@ ENV_NAMES = (
     "rudder_rate", "rudder_lag", "rudder_delay", "delta_max",
 )
 N_ENV = len(ENV_NAMES)
-OUT_NAMES = ("u", "v", "r", "x0", "y0", "psi", "delta", "n")
+OUT_NAMES = ("u", "v", "r", "x0", "y0", "psi", "delta", "n", "delta_cmd")
 
 # Controller codes (see ``study.maneuvers``): 0 open loop (command series), 1 zigzag programme,
 # 2 turning circle with pull-out.
@@ -218,6 +219,9 @@ def _templates():
                     out[j_out, 5, b] = psi[b]
                     out[j_out, 6, b] = delta[b]
                     out[j_out, 7, b] = n0
+                    # the steering gear's command at step k (open loop: the series itself; closed loop: what
+                    # the controller asked for), so a record can carry both the command and the actual angle
+                    out[j_out, 8, b] = cmd[k] if kind == CTRL_OPEN else hist[slot, b]
                 j_out += 1
             if not do_step:
                 break
@@ -351,7 +355,7 @@ def _templates():
         cmd : (nsteps + 1,) rudder command (open loop, and before the controller's start time)
         nprop : (nsteps + 1,) propeller speed [rps]
         ctrl : float array, controller programme (see study.maneuvers.encode)
-        out : (n_out, 8, B) output, n_out = nsteps // save_every + 1; must not overlap the inputs
+        out : (n_out, 9, B) output (OUT_NAMES), n_out = nsteps // save_every + 1; must not overlap the inputs
         Returns the number of output rows written.
         """
         if fingerprint < 0:

@@ -1,0 +1,159 @@
+"""``python -m study.diagnose train=<file|folder|glob> [validate=...] vessel=<v> model=<m> out=<dir>``.
+
+The model doctor (``study.doctor``): compares a model with measured records, shows where it fails, ranks the
+candidate missing effects by out-of-sample improvement, adds them one after the other, and writes
+``<out>/report.html`` (self-contained), ``<out>/report.json`` and ``<out>/figures/``; prints a short verdict.
+Options in ``conf/diagnose.yaml``. Records: the schema's CSV/Parquet files (``python -m study.simulate``
+makes them), HSVA's KVLCC2 ``.dat`` files and the Esso Osaka CSVs of ``../shared/data/real`` (read in place).
+"""
+from __future__ import annotations
+
+import glob as globmod
+import hashlib
+import sys
+from pathlib import Path
+
+import hydra
+from omegaconf import DictConfig, OmegaConf
+
+from .app import CONF_DIR
+
+
+def _is_real(path: Path) -> bool:
+    if path.suffix.lower() == ".dat":
+        return True
+    if path.suffix.lower() == ".csv":
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            head = fh.readline()
+        return "u_velo [m/s]" in head  # an Esso Osaka file
+    return False
+
+
+def load_records(spec) -> list:
+    """Records from a file, folder or glob: schema files, or the real datasets' own formats."""
+    from .loaders import load_real
+    from .schema import SUPPORTED, read_record
+
+    p = Path(str(spec)).expanduser()
+    if p.is_file():
+        files = [p]
+    elif p.is_dir():
+        files = sorted(f for f in p.iterdir() if f.suffix.lower() in SUPPORTED + (".dat",))
+    else:
+        files = sorted(Path(f) for f in globmod.glob(str(spec)) if Path(f).suffix.lower() in SUPPORTED + (".dat",))
+    if not files:
+        raise FileNotFoundError(f"{spec}: no record files (.csv, .parquet, .dat) found")
+    out = []
+    for f in files:
+        rec = load_real(f) if _is_real(f) else read_record(f)
+        rec.meta.setdefault("name", f.stem)
+        out.append(rec)
+    return out
+
+
+def _digest(records) -> list:
+    out = []
+    for r in records:
+        h = hashlib.sha256(r.data.to_csv(index=False).encode()).hexdigest()[:16]
+        out.append({"name": r.meta.get("name"), "path": r.path, "sha256_16": h})
+    return out
+
+
+def _use_rudder(records, column: str) -> None:
+    if column == "delta":
+        return
+    for r in records:
+        if column not in r.data.columns:
+            raise ValueError(f"{r.path or r.meta.get('name')}: rudder={column} but the record has no '{column}' "
+                             f"column (it has {list(r.data.columns)})")
+        r.data["delta"] = r.data[column]
+
+
+def _truths(records) -> dict:
+    """Effect parameters hidden in simulated records' metadata (a test or study can then compare)."""
+    out = {}
+    for r in records:
+        for e in r.meta.get("hidden_effects") or []:
+            out.setdefault(e.get("name"), e)
+    return out
+
+
+def log_runs(conf: dict, doctor, rep: dict, train, validate) -> list:
+    """Each ladder step as one run of the results table (study 'doctor')."""
+    from .results import ResultStore, run_guarded
+
+    store = ResultStore(conf["results_dir"])
+    ids = []
+    for step in rep["ladder"]:
+        effects = tuple(step["effects"])
+        key = [k for k in doctor.evaluations if k[0] == effects]
+        ev = doctor.evaluations[[k for k in key if k[2]][0] if any(k[2] for k in key) else key[0]]
+        cfg = {"study": "doctor", "vessel": conf["vessel"], "depth": conf.get("depth"),
+               "model": {**conf["model"], "effects": list(effects)}, "train": _digest(train),
+               "validate": _digest(validate), "structure": doctor.problem.structure.name,
+               "options": {k: conf[k] for k in ("min_improvement", "alpha", "tie", "rudder")}}
+
+        def result(ev=ev):
+            from .doctor.effects import describe
+
+            params = [{"equation": "effect" if k not in doctor.problem.base.param_names else k[0], "name": k,
+                       "estimate": float(v), "truth": None}
+                      for k, v in {**describe(ev.fit.outer), **ev.fit.coefs}.items()]
+            metrics = {"validation_error": ev.validation_error, "training_error": ev.training_error}
+            for rec, chans in ev.errors.items():
+                for c, e in chans.items():
+                    metrics[f"val_{rec}_nrmse_{c}"] = e["nrmse"]
+            return {"metrics": metrics, "params": params, "timings": {"fit": ev.seconds}}
+
+        rec = run_guarded(store, cfg, result, seed=None)
+        ids.append(rec["run_id"])
+    store.collect()
+    return ids
+
+
+def run(conf: dict) -> dict:
+    """Run the doctor from a resolved config (what the CLI and the tests call)."""
+    from .doctor.diagnose import Doctor, Options, write_report
+    from .sim.effects import ShallowWater, apply_effects
+
+    out = Path(conf["out"])
+    if (out / "report.json").exists() and not conf.get("overwrite"):  # before any work
+        raise FileExistsError(f"{out / 'report.json'} exists; refusing to overwrite it (pass overwrite=true)")
+    train = load_records(conf["train"])
+    validate = load_records(conf["validate"]) if conf.get("validate") else []
+    _use_rudder(train + validate, conf.get("rudder", "delta"))
+    depth = conf.get("depth") or {}
+    vessel_cfg = conf["vessel"]
+    if depth.get("h_T"):
+        vessel_cfg, _ = apply_effects(vessel_cfg, [ShallowWater(h_T=depth["h_T"], formula=depth.get("formula",
+                                                                                                  "kijima_1990"))])
+    opt = Options(min_improvement=float(conf["min_improvement"]), alpha=float(conf["alpha"]),
+                  tie=float(conf["tie"]), max_steps=int(conf["max_steps"]), candidates=tuple(conf["candidates"]),
+                  structure=conf.get("structure"))
+    doctor = Doctor(vessel_cfg, conf["model"], train, validate, opt)
+    doctor.run()
+    rep = write_report(doctor, conf["out"], conf["vessel"]["name"], conf["model"]["name"],
+                       overwrite=bool(conf.get("overwrite")))
+    truths = _truths(train + validate)
+    if truths:
+        rep["hidden_effects"] = truths
+    if conf.get("log_runs", True):
+        rep["run_ids"] = log_runs(conf, doctor, rep, train, validate)
+    return rep
+
+
+@hydra.main(config_path=CONF_DIR, config_name="diagnose", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    conf = OmegaConf.to_container(cfg, resolve=True)
+    rep = run(conf)
+    out = Path(conf["out"]).resolve()
+    print(rep["verdict"])
+    lad = " -> ".join(f"{s['step']} {s['validation_error']:.3g}" for s in rep["ladder"])
+    print(f"validation error: {lad}")
+    for n in rep.get("notes") or []:
+        print(f"note: {n}")
+    print(f"report: {out / 'report.html'} (and report.json, figures/)")
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -102,7 +102,10 @@ def log_runs(conf: dict, doctor, rep: dict, train, validate) -> list:
             metrics = {"validation_error": ev.validation_error, "training_error": ev.training_error}
             for rec, chans in ev.errors.items():
                 for c, e in chans.items():
-                    metrics[f"val_{rec}_nrmse_{c}"] = e["nrmse"]
+                    if isinstance(e, dict):
+                        metrics[f"val_{rec}_nrmse_{c}"] = e["nrmse"]
+                    else:
+                        metrics[f"val_{rec}_{c}"] = float(e)
             return {"metrics": metrics, "params": params, "timings": {"fit": ev.seconds}}
 
         rec = run_guarded(store, cfg, result, seed=None)

@@ -170,6 +170,13 @@ class Doctor:
         ladder = [{"step": "baseline", "effects": list(base.effects), "validation_error": base.validation_error,
                    "training_error": base.training_error}]
         notes = self.excitation_notes()
+        div = [rec for rec, e in base.errors.items() if e.get("diverged")]
+        if div:
+            notes.append(f"the baseline model diverges when replayed through {len(div)} of {len(base.errors)} "
+                         f"validation record(s) ({', '.join(div[:5])}{'...' if len(div) > 5 else ''}); a diverged "
+                         "replay counts as the largest error, so a candidate that keeps it stable scores well, but "
+                         "if every candidate diverges too the doctor cannot say what is missing: check the "
+                         "model's stability, or validate within the range it was identified on")
         first_ranking, missing, ambiguous = None, None, []
         current = base  # the ladder's step as reported (outer parameters refined on the replay error)
         ranking_base = base if not self.given else self.evaluate(tuple(self.given))  # its equation-error twin
@@ -221,7 +228,7 @@ class Doctor:
 
         def errs_rows():
             rows = []
-            for rec in base.errors:
+            for rec in base.errors:  # (the per-record 'diverged' flag is in the errors of baseline and final)
                 for c in CHANNELS + ("track",):
                     b, f = base.errors[rec][c], final.errors[rec][c]
                     rows.append({"record": rec, "channel": c, "unit": {"u": "m/s", "v": "m/s", "r": "rad/s",
@@ -233,10 +240,11 @@ class Doctor:
         m = r["missing"]
         if m:
             top = r["ranking"][0] if r["ranking"] else {}
-            verdict = (f"Missing effect: {m} (validation error {base.validation_error:.3g} -> "
-                       f"{top.get('validation_error', float('nan')):.3g}, {100 * top.get('improvement', 0):.0f} % "
-                       f"lower, parameters " + ", ".join(f"{k} = {v:.4g}" for k, v in top.get("parameters", {}).items())
-                       + ")")
+            e1 = r["ladder"][1]["validation_error"]  # the step as refined (the ranking's is by equation error)
+            pars = list(top.get("parameters", {}).items())
+            verdict = (f"Missing effect: {m} (validation error {base.validation_error:.3g} -> {e1:.3g}, "
+                       f"{100 * (1 - e1 / base.validation_error):.0f} % lower; " +
+                       ", ".join(f"{k} = {v:.4g}" for k, v in pars[:6]) + (", ..." if len(pars) > 6 else "") + ")")
             if len(r["ladder"]) > 2:
                 verdict += "; then " + ", ".join(s["step"][2:] for s in r["ladder"][2:])
         elif r["ambiguous"]:

@@ -369,14 +369,20 @@ class DoctorProblem:
                              "y0": out[:, 4], "psi": out[:, 5], "delta": out[:, 6]})
 
 
+#: the NRMSE counted for a channel whose prediction diverged or is off by more: a diverged replay is a
+#: bad prediction, not an undefined one, so that candidates can still be compared
+NRMSE_CAP = 10.0
+
+
 def record_errors(meas: pd.DataFrame, pred: pd.DataFrame | None) -> dict:
-    """Per channel RMSE and NRMSE (RMSE over the measured spread) of a prediction; the track error; inf when
-    the prediction diverged."""
+    """Per channel RMSE and NRMSE (RMSE over the measured spread, at most ``NRMSE_CAP``) of a prediction; the
+    track error; a diverged prediction counts ``NRMSE_CAP`` (its RMSE is inf) and ``diverged`` is set."""
     out = {}
     if pred is None:
         for c in CHANNELS:
-            out[c] = {"rmse": math.inf, "nrmse": math.inf}
-        out["track"] = {"rmse": math.inf, "nrmse": math.inf}
+            out[c] = {"rmse": math.inf, "nrmse": NRMSE_CAP}
+        out["track"] = {"rmse": math.inf, "nrmse": NRMSE_CAP}
+        out["diverged"] = True
         return out
     t = pred["time"].to_numpy()
     m = meas[(meas["time"] >= t[0]) & (meas["time"] <= t[-1])]
@@ -385,12 +391,13 @@ def record_errors(meas: pd.DataFrame, pred: pd.DataFrame | None) -> dict:
         b = np.interp(m["time"].to_numpy(), t, pred[c].to_numpy())
         rmse = float(np.sqrt(np.mean((b - a) ** 2)))
         sd = float(np.std(a))
-        out[c] = {"rmse": rmse, "nrmse": rmse / sd if sd > 0 else math.inf}
+        out[c] = {"rmse": rmse, "nrmse": min(rmse / sd, NRMSE_CAP) if sd > 0 else NRMSE_CAP}
     dx = np.interp(m["time"].to_numpy(), t, pred["x0"].to_numpy()) - m["x0"].to_numpy()
     dy = np.interp(m["time"].to_numpy(), t, pred["y0"].to_numpy()) - m["y0"].to_numpy()
     tr = float(np.sqrt(np.mean(dx ** 2 + dy ** 2)))
     span = float(np.hypot(np.ptp(m["x0"].to_numpy()), np.ptp(m["y0"].to_numpy())))
-    out["track"] = {"rmse": tr, "nrmse": tr / span if span > 0 else math.inf}
+    out["track"] = {"rmse": tr, "nrmse": min(tr / span, NRMSE_CAP) if span > 0 else NRMSE_CAP}
+    out["diverged"] = False
     return out
 
 

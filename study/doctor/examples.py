@@ -1,0 +1,114 @@
+"""``python -m study.doctor.examples``: the doctor's three worked examples, rebuilt into ``paper_figs/doctor/``.
+
+1. ``simulated_current``: the README's example -- five records of the 7 m KVLCC2 made by ``python -m
+   study.simulate`` with a hidden current (10 % of the speed towards the north-east), 1 % noise; the model is the
+   vessel's own (``known``).
+2. ``esso_osaka``: the Esso Osaka 3 m model's free-running zigzags (training) and the October turning circles
+   (validation), Osaka University's pond, with its measured wind; the model is ``esso_osaka`` (its particulars
+   with KVLCC2's MMG coefficients as a labelled stand-in: no coefficients of the Esso Osaka are published).
+3. ``kvlcc2_hsva``: HSVA's free-running KVLCC2 zigzags, the 5 deg and 1 deg switch-heading ones for training,
+   the 10/10 and 20/10 ones (both sides) for validation; the model is ``kvlcc2_l7``, the published MMG set.
+
+Each writes ``paper_figs/doctor/<example>/`` (report.html, report.json, figures/) and the summary
+``paper_figs/doctor/README.md``. The real data are read in place (``../shared/data/real``); an example whose
+data are missing is skipped and listed as such. The runs are not logged in the results table.
+"""
+from __future__ import annotations
+
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[2]
+OUT = REPO / "paper_figs" / "doctor"
+
+
+def _conf(**over) -> dict:
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    from ..app import CONF_DIR
+
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        cfg = compose(config_name="diagnose", overrides=[f"{k}={v}" for k, v in over.items()
+                                                         if k in ("vessel", "model")])
+    conf = OmegaConf.to_container(cfg, resolve=True)
+    conf.update({k: v for k, v in over.items() if k not in ("vessel", "model")})
+    conf.update(overwrite=True, log_runs=False)
+    return conf
+
+
+def simulated_current(tmp: Path) -> dict:
+    import subprocess
+
+    for m, stem in (("zigzag_10_10", "train_zz10"), ("zigzag_20_20", "train_zz20"), ("random_rudder", "train_rr"),
+                    ("zigzag_20_10", "val_zz2010"), ("turning_35", "val_turn35")):
+        subprocess.run([sys.executable, "-m", "study.simulate", "vessel=kvlcc2_l7", f"maneuver={m}",
+                        "environment=current", "noise=low", "noise.sample_dt=0.1", "sim.duration=300",
+                        f"seed={len(stem)}", f"out={tmp / stem}.csv"], check=True, capture_output=True)
+    from ..diagnose import run
+
+    return run(_conf(vessel="kvlcc2_l7", train=f"{tmp}/train_*.csv", validate=f"{tmp}/val_*.csv",
+                     out=str(OUT / "simulated_current")))
+
+
+def esso_osaka() -> dict:
+    from ..diagnose import run
+    from ..loaders import real_data_dir
+
+    d = real_data_dir() / "esso_osaka_frt" / "data"
+    return run(_conf(vessel="esso_osaka", train=f"{d}/zigzag/*.csv", validate=f"{d}/turning/turn_14-Oct*.csv",
+                     out=str(OUT / "esso_osaka")))
+
+
+def kvlcc2_hsva() -> dict:
+    from ..diagnose import run
+    from ..loaders import real_data_dir
+
+    d = real_data_dir() / "kvlcc2_hsva" / "raw_data"
+    return run(_conf(vessel="kvlcc2_l7", train=f"{d}/HSVA_CPMC_KVLCC2_Z_*_0?.dat",
+                     validate=f"{d}/HSVA_CPMC_KVLCC2_Z_*_10_?.dat", out=str(OUT / "kvlcc2_hsva")))
+
+
+def _summary(name: str, rep: dict) -> list:
+    lines = [f"### {name}", "", f"**{rep['verdict']}**", "", "| step | validation error |", "|---|---|"]
+    lines += [f"| {s['step']} | {s['validation_error']:.3g} |" for s in rep["ladder"]]
+    lines += ["", "| candidate | validation error | improvement | significant | parameters |", "|---|---|---|---|---|"]
+    for c in rep["ranking"]:
+        pars = ", ".join(f"{k} {v:.3g}" for k, v in list(c["parameters"].items())[:4])
+        lines.append(f"| {c['effect']} | {c['validation_error']:.3g} | {100 * c['improvement']:.0f} % | "
+                     f"{'yes' if c['significant'] else 'no'} | {pars} |")
+    if rep.get("notes"):
+        lines += [""] + [f"- {n}" for n in rep["notes"]]
+    lines += ["", f"Report: [`{name}/report.html`]({name}/report.html); figures in `{name}/figures/`.", ""]
+    return lines
+
+
+def main() -> int:
+    OUT.mkdir(parents=True, exist_ok=True)
+    lines = ["# The model doctor's worked examples", "", "Rebuilt by `python -m study.doctor.examples` (see its "
+             "docstring for the data and the models); never edited by hand.", "",
+             "Data: Esso Osaka free-running tests, Osaka University (Wakita et al. 2022; Miyauchi et al. 2022), "
+             "CC BY-NC-SA 4.0: the `esso_osaka/` figures are derived from them and carry that licence. KVLCC2: "
+             "HSVA free-running tests, SIMMAN 2008 (Stern et al. 2011). The data are read in place from "
+             "`../shared/data/real`, never copied here.", ""]
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, fn in (("simulated_current", lambda: simulated_current(Path(tmp))), ("esso_osaka", esso_osaka),
+                         ("kvlcc2_hsva", kvlcc2_hsva)):
+            try:
+                rep = fn()
+            except FileNotFoundError as e:
+                lines += [f"### {name}", "", f"not run: {e}", ""]
+                continue
+            print(f"{name}: {rep['verdict']}")
+            lines += _summary(name, rep)
+            (OUT / name / "summary.json").write_text(json.dumps({"verdict": rep["verdict"], "ladder": rep["ladder"],
+                                                                  "missing_effect": rep["missing_effect"]},
+                                                                 indent=1, default=float))
+    (OUT / "README.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -182,3 +182,25 @@ def test_cli_on_simulated_files_names_the_hidden_current(tmp_path):
     assert p.returncode != 0 and "refusing to overwrite" in p.stderr
     assert (out / "report.json").read_bytes() == before
 
+
+
+def test_a_real_report_renders_in_chromium(browser, tmp_path):
+    """The doctor's own report (the hidden-current case), opened in headless Chromium: every figure decodes
+    and is shown, the ranking has one row per candidate with the current first."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    from study.doctor.diagnose import write_report
+
+    d, rep = diagnose("current")
+    html_rep = write_report(d, tmp_path, "kvlcc2_l7", "known")
+    browser.get((tmp_path / "report.html").as_uri())
+    WebDriverWait(browser, 30).until(lambda b: b.execute_script(
+        "return document.readyState === 'complete' && Array.from(document.images).every(i => i.complete)"))
+    imgs = browser.execute_script("return Array.from(document.images).map(i => [i.naturalWidth, "
+                                  "i.getBoundingClientRect().height])")
+    assert len(imgs) == len(html_rep["figures"]) >= 5
+    assert all(w > 0 and h > 0 for w, h in imgs), imgs
+    rows = browser.find_elements(By.CSS_SELECTOR, "#ranking tr.candidate")
+    assert len(rows) == len(rep["ranking"]) == 6 and "current" in rows[0].text
+    assert "current" in browser.find_element(By.ID, "verdict").text

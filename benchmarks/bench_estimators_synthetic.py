@@ -43,6 +43,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from study.identify.estimators import make_estimator  # noqa: E402
+from study.identify.synthetic import manoeuvre_regressors  # noqa: E402
 
 NAMES = ["ls", "ridge", "lasso", "lssvm", "tlssvm", "lssvm_online", "svr_eps", "svr_nu", "sindy"]
 TARGET_S = {"ls": 0.05, "ridge": 0.05, "lssvm": 0.05, "tlssvm": 0.05, "svr_eps": 10.0, "svr_nu": 10.0, "sindy": 2.0}
@@ -51,29 +52,6 @@ C_LIBSVM = 0.01
 LIBSVM_TIMEOUT = 60.0
 
 
-def manoeuvre_regressors(n=2000, k=5, seed=0, duration=1680.0):
-    """The test data of tests/test_estimators.py (same function, without the extra columns)."""
-    rng = np.random.default_rng(seed)
-    t = np.linspace(0.0, duration, n, endpoint=False)
-
-    def smooth(nf=4):
-        f = rng.uniform(2, 12, nf) / duration * 10
-        a, ph = rng.uniform(0.3, 1.0, nf), rng.uniform(0, 2 * np.pi, nf)
-        s = (a[:, None] * np.sin(2 * np.pi * f[:, None] * t[None, :] + ph[:, None])).sum(0)
-        return s / s.std()
-
-    v, r, d = smooth(), smooth(), smooth()
-    cands = [v, r, v * np.abs(v), r * np.abs(r), v * v * r, v * r * r, r ** 3, d, v ** 3, d * np.abs(d), v * np.abs(r),
-             d ** 3, r * np.abs(v), v * r, d * r * r, d * v * v, np.sin(d)]
-    cols = [c / np.sqrt(np.mean(c * c)) for c in cands[:k]]
-    e = cols[1] - (cols[1] @ cols[0]) / (cols[0] @ cols[0]) * cols[0]
-    e /= np.sqrt(np.mean(e * e))
-    cols[1] = 0.99 * cols[0] + np.sqrt(1 - 0.99 ** 2) * e
-    scales = np.logspace(-3, 2, k)
-    rng.shuffle(scales)
-    X = np.column_stack(cols) * scales
-    theta = rng.choice([-1, 1], k) * rng.uniform(0.3, 1.0, k) / scales
-    return X, theta
 
 
 def _pin_one_core():

@@ -103,12 +103,12 @@ class Doctor:
         errors, folds = {}, []
         if self.mode == "given":
             for name, df in zip(self.val_names, self.val_df):
-                errors[name] = record_errors(df, self.problem.predict(fit, df))
+                errors[name] = record_errors(df, self.problem.predict(fit, df), self.problem.floors)
         else:
             for i, (name, df) in enumerate(zip(self.train_names, self.train_df)):
                 f = self.folds[i].fit(effects, start=fit.outer, grid=False)  # warm start from the full fit
                 folds.append(f)
-                errors[name] = record_errors(df, self.folds[i].predict(f, df))
+                errors[name] = record_errors(df, self.folds[i].predict(f, df), self.problem.floors)
         ev = Evaluation(effects, fit, errors, validation_error(errors), fit.training_error,
                         time.perf_counter() - t0, folds)
         self.evaluations[key] = ev

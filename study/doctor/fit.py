@@ -93,6 +93,9 @@ class DoctorProblem:
         self.L, self.U0 = float(p["Lpp"]), self.base.U0
         q = 0.5 * float(p["rho"]) * self.L * float(p["d"]) * self.U0 ** 2
         self.scale = np.array([q, q, q * self.L])
+        # the spread below which a channel is taken as constant when errors are normalised (2 % of the speed,
+        # of the yaw rate U0/L, 0.02 rad): a straight run's r has no spread, its error must not blow up
+        self.floors = {"u": 0.02 * self.U0, "v": 0.02 * self.U0, "r": 0.02 * self.U0 / self.L, "psi": 0.02}
         self._ref = None
         self._node_cache = {}
 
@@ -323,7 +326,7 @@ class DoctorProblem:
                 except (ValueError, np.linalg.LinAlgError):
                     return 1e6
                 f = Fit(effects, outer, coefs, 0.0)
-                errs = {i: record_errors(df, self.predict(f, df)) for i, df in enumerate(self.records)}
+                errs = {i: record_errors(df, self.predict(f, df), self.floors) for i, df in enumerate(self.records)}
                 e = validation_error(errs)
                 return e if np.isfinite(e) else 1e6
 
@@ -374,9 +377,10 @@ class DoctorProblem:
 NRMSE_CAP = 10.0
 
 
-def record_errors(meas: pd.DataFrame, pred: pd.DataFrame | None) -> dict:
-    """Per channel RMSE and NRMSE (RMSE over the measured spread, at most ``NRMSE_CAP``) of a prediction; the
-    track error; a diverged prediction counts ``NRMSE_CAP`` (its RMSE is inf) and ``diverged`` is set."""
+def record_errors(meas: pd.DataFrame, pred: pd.DataFrame | None, floors: dict | None = None) -> dict:
+    """Per channel RMSE and NRMSE (RMSE over the measured spread, or over ``floors[c]`` when that is larger; at
+    most ``NRMSE_CAP``) of a prediction; the track error; a diverged prediction counts ``NRMSE_CAP`` (its RMSE
+    is inf) and ``diverged`` is set."""
     out = {}
     if pred is None:
         for c in CHANNELS:
@@ -390,7 +394,7 @@ def record_errors(meas: pd.DataFrame, pred: pd.DataFrame | None) -> dict:
         a = m[c].to_numpy()
         b = np.interp(m["time"].to_numpy(), t, pred[c].to_numpy())
         rmse = float(np.sqrt(np.mean((b - a) ** 2)))
-        sd = float(np.std(a))
+        sd = max(float(np.std(a)), (floors or {}).get(c, 0.0))
         out[c] = {"rmse": rmse, "nrmse": min(rmse / sd, NRMSE_CAP) if sd > 0 else NRMSE_CAP}
     dx = np.interp(m["time"].to_numpy(), t, pred["x0"].to_numpy()) - m["x0"].to_numpy()
     dy = np.interp(m["time"].to_numpy(), t, pred["y0"].to_numpy()) - m["y0"].to_numpy()

@@ -62,6 +62,9 @@ def _exact_vessel(model_name):
     cfg = read_config("model", model_name)
     if cfg.get("type", "kind") == "nomoto":
         kinds = ["nomoto"]
+    elif cfg.get("kind") is None:  # `kind: null` (the `known` model) takes any vessel's force model as it is
+        kinds = [read_config("vessel", v)["kind"] for v in list_configs("vessel")]
+        kinds = [k for k in kinds if k != "nomoto"]
     else:
         kinds = [cfg["kind"]]
     for v in list_configs("vessel"):
@@ -118,7 +121,9 @@ def _prepared(model_name, structure_name, candidates=None):
 
 
 def _cases():
-    models = [m for m in list_configs("model") if _exact_vessel(m) is not None]
+    # a model that identifies nothing (`known`) has no recovery case
+    models = [m for m in list_configs("model") if _exact_vessel(m) is not None
+              and (read_config("model", m).get("equations") or read_config("model", m).get("type") == "nomoto")]
     out = []
     for m in models:
         second = int(read_config("model", m).get("order", 1)) == 2

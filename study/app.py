@@ -18,6 +18,22 @@ log = logging.getLogger("study")
 CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
 
 
+def _register_covering_sweeper() -> None:
+    """conf/config.yaml uses hydra_plugins/study_sweeper (Hydra's basic sweeper composing only a covering
+    subset of the jobs up front). Hydra finds plugins by scanning the `hydra_plugins` namespace, which a
+    setuptools editable install (`pip install -e .`) hides from the scan, so it is registered by hand here,
+    before any config is composed."""
+    from hydra.core.plugins import Plugins
+
+    plugins = Plugins.instance()  # first: its scan re-executes Hydra's core plugin modules, BasicSweeper's too
+    from hydra_plugins.study_sweeper.covering_sweeper import CoveringSweeper
+
+    plugins.register(CoveringSweeper)
+
+
+_register_covering_sweeper()
+
+
 def _results_dir(cfg: DictConfig) -> Path:
     return Path(str(cfg.results_dir)).resolve()
 

@@ -104,3 +104,21 @@ def test_hidden_effects_flow_through_a_run(tmp_path, environment):
         assert drift < 0.01
     else:
         assert drift > 0.01, f"{environment}: a hidden effect left no trace in the estimates"
+
+
+def test_covering_sweeper_composes_every_value_once():
+    from hydra_plugins.study_sweeper.covering_sweeper import covering_jobs
+    import itertools
+    keys = {"a": "123", "b": "xy", "c": "pqrs"}
+    batch = [[f"{k}={v}" for k, v in zip(keys, combo)] for combo in itertools.product(*keys.values())]
+    keep = covering_jobs(batch)
+    assert {o for job in keep for o in job} == {o for job in batch for o in job}
+    assert len(keep) <= sum(len(v) for v in keys.values()) and len(batch) == 24
+
+
+def test_a_bad_value_anywhere_in_a_sweep_fails_before_any_run(tmp_path):
+    # the misspelt option is the last value of an inner key: a covering subset still composes it
+    results = tmp_path / "results"
+    p = _run_app(["-m", "experiment=tiny", "noise=none,low", "structure=euler,centrall"], results)
+    assert p.returncode != 0 and "centrall" in p.stderr
+    assert not (results / "records").exists() or not list((results / "records").glob("*.json"))

@@ -1,0 +1,63 @@
+"""Hydra's basic sweeper, checking a covering subset of the sweep's configs before launching.
+
+Why a plugin: Hydra's BasicSweeper composes *every* job's config before launching anything, to catch
+composition errors early ("This can be a bit slow for large jobs", its own comment), and the launcher composes
+each one again. At about 0.2 s a config, the 1188-job `grand` study spent 4 minutes composing before its
+first job on a 2-core machine. This sweeper composes only enough jobs that every swept value (every
+`key=value` of the sweep) appears in at least one composed config: a misspelt group option, a bad value or
+an unknown key still fails before any job runs, in about 25 compositions instead of 1188. An error that only
+a particular combination of values would raise surfaces when the launcher composes that job; the runs that
+finished before it stay in the results table and the next start resumes them. `validate_all: true` restores
+Hydra's behaviour. Hydra only loads sweepers from the `hydra_plugins` namespace package, hence this module.
+"""
+# no `from __future__ import annotations`: Hydra execs plugin modules outside sys.modules, and dataclasses
+# then cannot resolve string annotations
+
+import logging
+import time
+from dataclasses import dataclass
+from typing import Dict, Optional, Sequence
+
+from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+from hydra.core.config_store import ConfigStore
+
+log = logging.getLogger(__name__)
+
+
+@dataclass
+class CoveringSweeperConf:
+    _target_: str = "hydra_plugins.study_sweeper.covering_sweeper.CoveringSweeper"
+    max_batch_size: Optional[int] = None
+    params: Optional[Dict[str, str]] = None
+    validate_all: bool = False
+
+
+ConfigStore.instance().store(group="hydra/sweeper", name="covering", node=CoveringSweeperConf, provider="study")
+
+
+def covering_jobs(batch: Sequence[Sequence[str]]) -> list[Sequence[str]]:
+    """A subset of the jobs in which every override string of the batch appears at least once (one greedy
+    pass: a job is kept when it brings an override not seen yet; for a cartesian sweep that is about the sum of
+    the numbers of values, not their product)."""
+    seen: set[str] = set()
+    keep = []
+    for job in batch:
+        new = set(job) - seen
+        if new:
+            keep.append(job)
+            seen |= new
+    return keep
+
+
+class CoveringSweeper(BasicSweeper):
+    def __init__(self, max_batch_size: Optional[int], params: Optional[Dict[str, str]] = None,
+                 validate_all: bool = False) -> None:
+        super().__init__(max_batch_size=max_batch_size, params=params)
+        self.validate_all = validate_all
+
+    def validate_batch_is_legal(self, batch: Sequence[Sequence[str]]) -> None:
+        jobs = list(batch) if self.validate_all else covering_jobs(batch)
+        tic = time.perf_counter()
+        super().validate_batch_is_legal(jobs)
+        log.info(f"Composed {len(jobs)} of {len(batch)} job configs to validate the sweep "
+                 f"({time.perf_counter() - tic:.1f} s)")

@@ -33,6 +33,11 @@ STRUCTURE_ORDER = ["euler", "diff_center", "central", "integral", "smoothed", "o
 NOISE_ORDER = ["none", "low_outputs", "low", "medium", "high"]
 
 
+def _cell(text: str) -> str:
+    """Text for a Markdown table cell: a bare | (as in |relative error|) would split the cell."""
+    return text.replace("|", "\\|")
+
+
 def _plt():
     import matplotlib
 
@@ -575,18 +580,18 @@ def study_seed004(b: Builder, runs, params, claims):
                                     "cfg_maneuvers.name": "records", "cfg_noise.name": "noise"}), s,
                 "difference_vs_integral", "largest |relative error| of the KT parameters: DE by output error on the "
                 "heading ('integral') against central differences of the heading")
-        fig, axes = plt.subplots(1, 2, figsize=(9, 3.2), sharey=True)
+        fig, axes = plt.subplots(1, 2, figsize=(10, 4.4), sharey=True, layout="constrained")
         for ax, model in zip(axes, ("nomoto1_nl", "nomoto2_nl")):
             d = tab[tab["cfg_model.name"] == model] if "cfg_model.name" in tab else tab[tab["model"] == model]
             d = d.rename(columns={"cfg_vessel.name": "vessel", "cfg_maneuvers.name": "records",
                                   "cfg_noise.name": "noise"})
-            labels = [f"{v}\n{m.replace('seed004', 'x2').replace('_single', '') or 'x2'}\n{n}"
+            labels = [f"{v} {'x1' if m.endswith('_single') else 'x2'} {n}"
                       for v, m, n in zip(d["vessel"], d["records"], d["noise"])]
             x = np.arange(len(d))
             for k, st in enumerate(("central", "output_error")):
                 if st in d:
                     ax.bar(x + 0.4 * k, d[st].to_numpy(float), width=0.4, label=st)
-            ax.set_xticks(x + 0.2, labels, rotation=90, fontsize=5)
+            ax.set_xticks(x + 0.2, labels, rotation=90, fontsize=6)
             ax.set_yscale("log")
             ax.set_title(model)
         axes[0].set_ylabel("largest |relative error|")
@@ -865,7 +870,7 @@ def write_readme(b: Builder, runs: pd.DataFrame, missing: list) -> None:
              "|---|---|---|"]
     for o in STATIC + sorted(b.written, key=lambda o: (o.study, o.path)):
         n = int((runs["cfg_study"] == o.study).sum()) if o.study in STUDIES and len(runs) else None
-        lines.append(f"| `{o.path}` | {o.what} | {o.study}" + (f" ({n} runs)" if n else "") + " |")
+        lines.append(f"| `{o.path}` | {_cell(o.what)} | {o.study}" + (f" ({n} runs)" if n else "") + " |")
     if missing:
         lines += ["", "Studies without finished runs in the table (nothing rebuilt for them): " +
                   ", ".join(f"`{m}`" for m in missing) + "."]
@@ -879,7 +884,7 @@ def write_claims(b: Builder, claims: list, missing: list) -> None:
              "at least 80 % of the set-ups compared; holds in part: 30-80 %; does not hold: fewer).", "",
              "| seed | claim | study | verdict | numbers |", "|---|---|---|---|---|"]
     for c in claims:
-        lines.append(f"| {c['seed']} | {c['claim']} | `{c['study']}` | **{c['verdict']}** | {c['numbers']} |")
+        lines.append(f"| {c['seed']} | {_cell(c['claim'])} | `{c['study']}` | **{c['verdict']}** | {_cell(c['numbers'])} |")
     for m in missing:
         if m in ("seed000_svr_mmg", "seed001_shallow_water", "seed003_online_auv", "seed004_kt_de"):
             lines.append(f"| {m[4:7]} | (see the seed's row when run) | `{m}` | not run | - |")

@@ -82,7 +82,7 @@ def log_runs(conf: dict, doctor, rep: dict, train, validate) -> list:
     """Each ladder step as one run of the results table (study 'doctor')."""
     from .results import ResultStore, run_guarded
 
-    store = ResultStore(conf["results_dir"])
+    store = ResultStore(conf.get("results_dir") or Path(conf["out"]) / "results")
     ids = []
     for step in rep["ladder"]:
         effects = tuple(step["effects"])
@@ -94,12 +94,12 @@ def log_runs(conf: dict, doctor, rep: dict, train, validate) -> list:
                "options": {k: conf[k] for k in ("min_improvement", "alpha", "tie", "rudder")}}
 
         def result(ev=ev):
-            from .doctor.effects import describe
-
-            params = [{"equation": "effect" if k not in doctor.problem.base.param_names else k[0], "name": k,
+            pb = doctor.problem
+            params = [{"equation": pb.equation_of(k) if k in pb.base.param_names else "effect", "name": k,
                        "estimate": float(v), "truth": None}
-                      for k, v in {**describe(ev.fit.outer), **ev.fit.coefs}.items()]
-            metrics = {"validation_error": ev.validation_error, "training_error": ev.training_error}
+                      for k, v in pb.describe(ev.fit).items() if isinstance(v, (int, float))]
+            metrics = {"validation_error": ev.validation_error, "training_error": ev.training_error,
+                       "diverged_records": float(len(ev.diverged))}
             for rec, chans in ev.errors.items():
                 for c, e in chans.items():
                     if isinstance(e, dict):
@@ -130,9 +130,12 @@ def run(conf: dict) -> dict:
     if depth.get("h_T"):
         vessel_cfg, _ = apply_effects(vessel_cfg, [ShallowWater(h_T=depth["h_T"], formula=depth.get("formula",
                                                                                                   "kijima_1990"))])
+    cands = conf.get("candidates")
+    path = conf.get("effect_path") or ()
     opt = Options(min_improvement=float(conf["min_improvement"]), alpha=float(conf["alpha"]),
-                  tie=float(conf["tie"]), max_steps=int(conf["max_steps"]), candidates=tuple(conf["candidates"]),
-                  structure=conf.get("structure"))
+                  tie=float(conf["tie"]), max_steps=int(conf["max_steps"]),
+                  candidates=tuple(cands) if cands is not None else None, structure=conf.get("structure"),
+                  effect_path=tuple([path] if isinstance(path, str) else path), checks=str(conf.get("checks", "error")))
     doctor = Doctor(vessel_cfg, conf["model"], train, validate, opt)
     doctor.run()
     rep = write_report(doctor, conf["out"], conf["vessel"]["name"], conf["model"]["name"],

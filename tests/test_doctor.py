@@ -19,8 +19,8 @@ import sys
 import pandas as pd
 import pytest
 
-from study.doctor.diagnose import Doctor
-from study.doctor.effects import NONLINEAR_HULL
+from study.doctor.diagnose import Doctor, Evaluation, Options
+from study.doctor.effects import effect_config
 from study.measure import MeasurementModel
 from study.pipeline import resolve_effects
 from study.sim import load_vessel, read_config, simulate
@@ -30,7 +30,8 @@ U0 = float(VESSEL["operation"]["U0"])
 TRAIN = ("zigzag_10_10", "zigzag_20_20", "random_rudder")
 VALIDATE = ("zigzag_20_10", "turning_35")
 KNOWN = {"name": "known", "type": "kind", "equations": {}}
-LINEAR_HULL = {"name": "linear_hull", "type": "kind", "equations": {}, "omit": list(NONLINEAR_HULL["mmg"])}
+LINEAR_HULL = {"name": "linear_hull", "type": "kind", "equations": {},
+               "omit": effect_config("hull_nonlinear")["options"]["terms"]["mmg"]}
 
 CASES = {
     "current": ([{"name": "current", "speed_U0": 0.1, "direction_deg": 45.0}], KNOWN, False),
@@ -144,14 +145,20 @@ def test_two_candidates_within_the_tie_are_reported_as_indistinguishable(monkeyp
     """The decision rule: when the two best significant candidates are within 10 % of each other, the report
     names both and no missing effect (it does not guess)."""
     train, val = records([], duration=60.0)
-    d = Doctor(VESSEL, KNOWN, train, val)
+    d = Doctor(VESSEL, KNOWN, train, val, Options(candidates=("current", "wind", "yaw_bias")))
+    real = Doctor.evaluate
+    scale = {"current": 0.40, "wind": 0.42, "yaw_bias": 0.95}
 
-    def fake_rank(self, base):
-        mk = lambda e, v: {"effect": e, "validation_error": v, "improvement": (1.0 - v), "significant": v < 0.9,
-                           "p_value": None, "parameters": {}, "training_error": 1.0, "seconds": 0.0, "note": ""}
-        return [mk("current", 0.40), mk("wind", 0.42), mk("yaw_bias", 0.95)]
+    def fake_evaluate(self, effects, start=None, fixed=(), refine=False):
+        ev = real(self, (), start, fixed, refine)  # the baseline's errors, scaled per candidate
+        if not effects:
+            return ev
+        f = scale[effects[-1]]
+        errs = {r: {c: ({"rmse": e["rmse"] * f, "nrmse": e["nrmse"] * f} if isinstance(e, dict) else e)
+                    for c, e in es.items()} for r, es in ev.errors.items()}
+        return Evaluation(tuple(effects), ev.fit, errs, ev.validation_error * f, ev.training_error, 0.0)
 
-    monkeypatch.setattr(Doctor, "rank", fake_rank)
+    monkeypatch.setattr(Doctor, "evaluate", fake_evaluate)
     d.run()
     rep = d.report()
     assert rep["missing_effect"] is None and rep["ambiguous"] == ["current", "wind"]

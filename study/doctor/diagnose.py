@@ -2,19 +2,25 @@
 
 1. **Baseline**: the model (with the effects the user already added) identified on the training records and
    replayed through the validation records (or, with no validation records, each record held out in turn).
-2. **Candidates**: each effect of the catalogue not in the model is added, the model re-identified on the
-   training records, and replayed through the validation records. Its *improvement* is the relative fall of the
-   validation error (mean NRMSE of u, v, r, psi).
+2. **Candidates**: each effect of the catalogue (``conf/effect``, plus the user's) not in the model is added,
+   the model re-identified on the training records, and replayed through the validation records. Its
+   *improvement* is the relative fall of the validation error (the mean over records of the mean NRMSE of u,
+   v, r, psi; NRMSE: RMSE over the measured channel's standard deviation, or a floor of 2 % of U0, of U0/L and
+   0.02 rad when the channel hardly varies).
 3. **Significance** (parsimony): a candidate is significant when the validation error falls by at least
    ``min_improvement`` (default 10 %) -- out-of-sample, so an effect that only fits noise earns nothing -- and,
    with three validation records or more, the per-record errors fall consistently (one-sided paired t-test
-   on the log errors, p < ``alpha``).
+   on the log errors, p < ``alpha``). With fewer records the report says the test was not possible.
 4. **Verdict**: the best significant candidate is the missing effect, unless the next significant one is within
    ``tie`` (default 10 %) of its validation error: then the data cannot tell them apart, and the report says so
-   (``missing_effect`` null, ``ambiguous`` the pair). Too little excitation (rudder spread under 2 deg) or too
-   short records (under 5 ship lengths of travel) are reported as such.
-5. **Ladder**: the missing effect is added, the remaining candidates ranked again on top of it, and so on while a
-   significant one remains (two hidden effects are found one after the other).
+   (``missing_effect`` null, ``ambiguous`` the pair). Each verdict is repeated with each validation record left
+   out and reported as "named in k of n".
+5. **Ladder**: the missing effect is added (its parameters refined on the training replays), the remaining
+   candidates ranked again on top of it, and so on while a significant one remains. A step whose validation
+   error is not lower than the step before is rejected: the ladder stops and says why.
+6. **Divergence**: a replay that leaves the physical envelope (``fit.ENVELOPE``) or overflows is *diverged*:
+   it has no error to compare. A diverged baseline gets a headline of its own and no missing effect; a
+   diverged candidate is never significant.
 """
 from __future__ import annotations
 
@@ -25,8 +31,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from .effects import CATALOGUE, describe
-from .fit import CHANNELS, DoctorProblem, record_errors, validation_error
+from .effects import list_effects, registry
+from .fit import CHANNELS, DoctorProblem, diverged_records, record_error, record_errors, validation_error
+
+#: the consistency test needs this many validation records (a paired t-test on fewer has no power)
+MIN_RECORDS_FOR_TEST = 3
 
 
 @dataclass
@@ -35,19 +44,28 @@ class Options:
     alpha: float = 0.05
     tie: float = 0.10
     max_steps: int = 3
-    candidates: tuple = tuple(CATALOGUE)
+    candidates: tuple | None = None  # None: every discovered effect
     structure: str | dict | None = None  # None: Savitzky-Golay over 0.2 L/U0 (see DoctorProblem)
+    effect_path: tuple = ()  # extra folders of effect YAMLs (the user's own effects)
+    checks: str = "error"  # the record checks that need the vessel: error | warn | off
 
 
 @dataclass
 class Evaluation:
     effects: tuple
     fit: object
-    errors: dict  # record -> channel -> {rmse, nrmse}
+    errors: dict  # record -> channel -> {rmse, nrmse}, and 'diverged'
     validation_error: float
     training_error: float
     seconds: float
     fold_fits: list = field(default_factory=list)
+
+    @property
+    def diverged(self) -> list:
+        return diverged_records(self.errors)
+
+    def per_record(self, records=None) -> np.ndarray:
+        return np.array([record_error(self.errors[r]) for r in (records or list(self.errors))])
 
 
 def _names(records) -> list:
@@ -63,6 +81,48 @@ def _names(records) -> list:
     return out
 
 
+def compare(base: np.ndarray, cand: np.ndarray, opt: Options) -> dict:
+    """The decision rule for one candidate against its base, from per-record validation errors: improvement of
+    the mean, the paired test when there are enough records, significance. Diverged (inf) errors on either side
+    make no comparison."""
+    out = {"improvement": None, "p_value": None, "significant": False, "diverged": False}
+    if not (np.all(np.isfinite(base)) and np.all(np.isfinite(cand))):
+        out["diverged"] = bool(not np.all(np.isfinite(cand)))
+        return out
+    e0, e1 = float(np.mean(base)), float(np.mean(cand))
+    imp = (e0 - e1) / e0 if e0 > 0 else 0.0
+    ok = imp >= opt.min_improvement
+    p = None
+    if len(base) >= MIN_RECORDS_FOR_TEST:
+        d = np.log(base) - np.log(cand)
+        if np.allclose(d, d[0]):
+            p = 0.0 if d[0] > 0 else 1.0
+        else:
+            p = float(stats.ttest_1samp(d, 0.0, alternative="greater").pvalue)
+        ok = ok and p < opt.alpha
+    out.update(improvement=float(imp), p_value=p, significant=bool(ok))
+    return out
+
+
+def decide(base: Evaluation, cands: dict, opt: Options, records=None) -> tuple:
+    """(named effect or None, ambiguous pair or [], rows sorted best first) on the given validation records."""
+    records = records or list(base.errors)
+    b = base.per_record(records)
+    rows = []
+    for name, ev in cands.items():
+        c = ev.per_record(records)
+        rows.append({"effect": name, "validation_error": float(np.mean(c)), **compare(b, c, opt)})
+    rows.sort(key=lambda d: (not np.isfinite(d["validation_error"]), d["validation_error"]))
+    if not np.all(np.isfinite(b)):
+        return None, [], rows
+    sig = [r for r in rows if r["significant"]]
+    if not sig:
+        return None, [], rows
+    if len(sig) > 1 and sig[1]["validation_error"] <= sig[0]["validation_error"] * (1 + opt.tie):
+        return None, [sig[0]["effect"], sig[1]["effect"]], rows
+    return sig[0]["effect"], [], rows
+
+
 class Doctor:
     """Run the diagnosis of a model on records (see the module docstring)."""
 
@@ -70,9 +130,9 @@ class Doctor:
         self.opt = options or Options()
         self.vessel_cfg, self.model_cfg = vessel_cfg, dict(model_cfg)
         self.given = list(self.model_cfg.get("effects") or [])
-        unknown = [e for e in self.given + list(self.opt.candidates) if e not in CATALOGUE]
-        if unknown:
-            raise ValueError(f"unknown effect(s) {unknown}; the catalogue has {sorted(CATALOGUE)}")
+        names = list(self.opt.candidates) if self.opt.candidates is not None else list_effects(self.opt.effect_path)
+        self.effects = registry(list(dict.fromkeys(self.given + names)), self.opt.effect_path)
+        self.order = list(self.effects)
         self.train = list(train)
         self.validate = list(validate) if validate else []
         self.mode = "given" if self.validate else "held_out"
@@ -81,20 +141,42 @@ class Doctor:
                              "turn); give validate=<file|folder|glob>")
         self.train_names = _names(self.train)
         self.val_names = _names(self.validate) if self.validate else self.train_names
-        self.train_df = [r.data if hasattr(r, "data") else r for r in self.train]
+        self.check_messages = []
+        if self.opt.checks != "off":
+            from .checks import check_records
+
+            self.check_messages = check_records(vessel_cfg, self.train + self.validate,
+                                                strict=self.opt.checks == "error")
+        self.problem = DoctorProblem(vessel_cfg, self.model_cfg, self.train, self.opt.structure, self.effects,
+                                     self.train_names)
         self.val_df = [r.data if hasattr(r, "data") else r for r in self.validate]
-        self.problem = DoctorProblem(vessel_cfg, self.model_cfg, self.train_df, self.opt.structure)
+        self.val_infos = [self.problem.info_for(df, getattr(r, "meta", None), n)
+                          for r, df, n in zip(self.validate, self.val_df, self.val_names)]
+        self.train_df = self.problem.records
         if self.mode == "held_out":
-            self.folds = [DoctorProblem(vessel_cfg, self.model_cfg, [d for j, d in enumerate(self.train_df) if j != i],
-                                        self.opt.structure) for i in range(len(self.train_df))]
+            self.folds = [DoctorProblem(vessel_cfg, self.model_cfg, [r for j, r in enumerate(self.train) if j != i],
+                                        self.opt.structure, self.effects,
+                                        [n for j, n in enumerate(self.train_names) if j != i])
+                          for i in range(len(self.train))]
+        self.not_applicable = {}
+        for e, eff in self.effects.items():
+            why = eff.applies(self.problem)
+            if why:
+                if e in self.given:
+                    raise ValueError(f"model effect '{e}' cannot act here: {why}")
+                self.not_applicable[e] = why
+        self.candidates = [e for e in names if e not in self.not_applicable]
         self.evaluations: dict = {}
+
+    def key(self, effects) -> tuple:
+        return tuple(sorted(set(effects), key=self.order.index))
 
     # ------------------------------------------------------------------------------------------ evaluate
     def evaluate(self, effects, start=None, fixed=(), refine=False) -> Evaluation:
         """Identify with ``effects`` and measure the validation error. ``fixed``: outer parameters kept at their
-        ``start`` values (a candidate on top of a ladder step is fitted alone); ``refine``: polish the outer
-        parameters on the training replay error (the ladder's steps)."""
-        effects = tuple(sorted(set(effects), key=list(CATALOGUE).index))
+        ``start`` values; ``refine``: polish the outer parameters on the training replay error (the ladder's
+        steps)."""
+        effects = self.key(effects)
         key = (effects, bool(fixed), refine)
         if key in self.evaluations:
             return self.evaluations[key]
@@ -102,53 +184,52 @@ class Doctor:
         fit = self.problem.fit(effects, start=start, fixed=fixed, refine=refine)
         errors, folds = {}, []
         if self.mode == "given":
-            for name, df in zip(self.val_names, self.val_df):
-                errors[name] = record_errors(df, self.problem.predict(fit, df), self.problem.floors)
+            for name, df, info in zip(self.val_names, self.val_df, self.val_infos):
+                errors[name] = record_errors(df, self.problem.predict(fit, df, info), self.problem.floors)
         else:
             for i, (name, df) in enumerate(zip(self.train_names, self.train_df)):
                 f = self.folds[i].fit(effects, start=fit.outer, grid=False)  # warm start from the full fit
                 folds.append(f)
-                errors[name] = record_errors(df, self.folds[i].predict(f, df), self.problem.floors)
+                errors[name] = record_errors(df, self.folds[i].predict(f, df, self.problem.infos[i]),
+                                             self.problem.floors)
         ev = Evaluation(effects, fit, errors, validation_error(errors), fit.training_error,
                         time.perf_counter() - t0, folds)
         self.evaluations[key] = ev
         return ev
 
-    def _significance(self, base: Evaluation, cand: Evaluation) -> tuple[bool, float | None, float]:
-        e0, e1 = base.validation_error, cand.validation_error
-        if not np.isfinite(e1):
-            return False, None, -math.inf
-        imp = (e0 - e1) / e0 if np.isfinite(e0) and e0 > 0 else (1.0 if np.isfinite(e1) else 0.0)
-        per0 = np.array([np.mean([base.errors[r][c]["nrmse"] for c in CHANNELS]) for r in base.errors])
-        per1 = np.array([np.mean([cand.errors[r][c]["nrmse"] for c in CHANNELS]) for r in cand.errors])
-        p = None
-        ok = imp >= self.opt.min_improvement
-        if len(per0) >= 3 and np.all(np.isfinite(per0)) and np.all(np.isfinite(per1)):
-            d = np.log(per0) - np.log(per1)
-            if np.allclose(d, d[0]):
-                p = 0.0 if d[0] > 0 else 1.0
-            else:
-                p = float(stats.ttest_1samp(d, 0.0, alternative="greater").pvalue)
-            ok = ok and p < self.opt.alpha
-        return bool(ok), p, float(imp)
-
-    def rank(self, base: Evaluation) -> list:
-        """Every candidate not in ``base`` added on top of it, best (lowest validation error) first."""
-        out = []
-        for c in self.opt.candidates:
+    def rank(self, base: Evaluation) -> tuple:
+        """Every candidate not in ``base`` added on top of it: (rows best first, evaluations by effect)."""
+        evs = {}
+        for c in self.candidates:
             if c in base.effects:
                 continue
             # the candidate's parameters from its grid, the ones already found re-fitted with it (a first effect's
             # estimate absorbs part of a second one, and must be free to give it back)
-            ev = self.evaluate(base.effects + (c,), start=base.fit.outer)
-            sig, p, imp = self._significance(base, ev)
-            extra = {k: v for k, v in ev.fit.outer.items() if k not in base.fit.outer}
-            lin = {k: v for k, v in ev.fit.coefs.items() if k not in base.fit.coefs}
-            out.append({"effect": c, "validation_error": ev.validation_error, "improvement": imp,
-                        "significant": sig, "p_value": p, "parameters": {**describe(extra), **lin},
-                        "training_error": ev.training_error, "seconds": ev.seconds, "note": ""})
-        out.sort(key=lambda d: (not np.isfinite(d["validation_error"]), d["validation_error"]))
-        return out
+            evs[c] = self.evaluate(base.effects + (c,), start=base.fit.outer)
+        _, _, rows = decide(base, evs, self.opt)
+        for r in rows:
+            ev = evs[r["effect"]]
+            r.update({"parameters": self.problem.describe(ev.fit, [r["effect"]], model=False),
+                      "training_error": ev.training_error, "seconds": ev.seconds, "note": "",
+                      "diverged_records": ev.diverged})
+            if r["diverged"]:
+                r["note"] = f"diverges on {', '.join(ev.diverged)}"
+        return rows, evs
+
+    def stability(self, base: Evaluation, evs: dict, named, ambiguous) -> dict:
+        """The step's verdict repeated with each validation record left out: in how many it is the same."""
+        recs = list(base.errors)
+        n = len(recs)
+        if n < 2:
+            return {"k": None, "n": n, "text": f"not assessable with {n} validation record (leave-one-out needs 2)"}
+        same, outcomes = 0, []
+        for r in recs:
+            m, amb, _ = decide(base, evs, self.opt, [x for x in recs if x != r])
+            outcomes.append({"left_out": r, "named": m, "ambiguous": amb})
+            same += (m == named) if named else (m is None and (not ambiguous or sorted(amb) == sorted(ambiguous)))
+        what = named or ("no missing effect" if not ambiguous else "the tie " + " / ".join(ambiguous))
+        return {"k": int(same), "n": n, "text": f"{what}: named in {same} of {n} (each validation record left out "
+                "in turn)", "outcomes": outcomes}
 
     # ------------------------------------------------------------------------------------------- run
     def excitation_notes(self) -> list:
@@ -164,110 +245,152 @@ class Doctor:
                 notes.append(f"training record {name}: only {dist / L:.2g} ship lengths of travel (short)")
         return notes
 
+    def _ladder_row(self, step: str, ev: Evaluation, **extra) -> dict:
+        return {"step": step, "effects": list(ev.effects), "validation_error": ev.validation_error,
+                "training_error": ev.training_error, "diverged": ev.diverged, **extra}
+
     def run(self) -> dict:
         t0 = time.perf_counter()
         base = self.evaluate(tuple(self.given), refine=bool(self.given))
-        ladder = [{"step": "baseline", "effects": list(base.effects), "validation_error": base.validation_error,
-                   "training_error": base.training_error}]
-        notes = self.excitation_notes()
-        div = [rec for rec, e in base.errors.items() if e.get("diverged")]
-        if div:
-            notes.append(f"the baseline model diverges when replayed through {len(div)} of {len(base.errors)} "
-                         f"validation record(s) ({', '.join(div[:5])}{'...' if len(div) > 5 else ''}); a diverged "
-                         "replay counts as the largest error, so a candidate that keeps it stable scores well, but "
-                         "if every candidate diverges too the doctor cannot say what is missing: check the "
-                         "model's stability, or validate within the range it was identified on")
-        first_ranking, missing, ambiguous = None, None, []
+        ladder = [self._ladder_row("baseline", base)]
+        notes = list(self.check_messages) + self.excitation_notes()
+        n_val = len(base.errors)
+        if n_val < MIN_RECORDS_FOR_TEST:
+            notes.append(f"only {n_val} validation record(s): the consistency test (a paired t-test of the per-record "
+                         f"errors, which needs at least {MIN_RECORDS_FOR_TEST}) was not run, so a verdict rests on "
+                         f"the mean error alone; give at least {MIN_RECORDS_FOR_TEST} validation records (or "
+                         f"{MIN_RECORDS_FOR_TEST} training records, each held out in turn) to settle it")
+        first_ranking, missing, ambiguous, stab = None, None, [], []
+        diverged = {"baseline": base.diverged}
         current = base  # the ladder's step as reported (outer parameters refined on the replay error)
         ranking_base = base if not self.given else self.evaluate(tuple(self.given))  # its equation-error twin
+        if base.diverged:
+            notes.insert(0, f"the baseline model DIVERGES when replayed through {len(base.diverged)} of {n_val} "
+                         f"validation record(s) ({', '.join(base.diverged)}): it has no validation error to "
+                         "improve on, so no missing effect is named. Check the model's stability (an identified "
+                         "hull extrapolating beyond its training manoeuvres), validate within the range it was "
+                         "identified on, or add training records that cover the validation manoeuvres")
         for step in range(self.opt.max_steps):
             # candidates are fitted by equation error: compared with the equation-error fit of the same step
-            ranking = self.rank(ranking_base)
+            ranking, evs = self.rank(ranking_base)
+            m, amb, _ = decide(ranking_base, evs, self.opt)
             if first_ranking is None:
                 first_ranking = ranking
-            sig = [r for r in ranking if r["significant"]]
-            if not sig:
+            if base.diverged:
                 break
-            best = sig[0]
-            if len(sig) > 1 and sig[1]["validation_error"] <= best["validation_error"] * (1 + self.opt.tie):
-                pair = [best["effect"], sig[1]["effect"]]
+            st = self.stability(ranking_base, evs, m, amb)
+            st["step"] = step + 1
+            if amb:
                 if step == 0:
-                    ambiguous = pair
-                notes.append(f"the data cannot tell {pair[0]} from {pair[1]} apart: validation errors "
-                             f"{best['validation_error']:.3g} and {sig[1]['validation_error']:.3g} are within "
+                    ambiguous = amb
+                stab.append(st)
+                a, b = (next(r for r in ranking if r["effect"] == e) for e in amb)
+                notes.append(f"the data cannot tell {amb[0]} from {amb[1]} apart: validation errors "
+                             f"{a['validation_error']:.3g} and {b['validation_error']:.3g} are within "
                              f"{100 * self.opt.tie:.0f} % (more varied manoeuvres would separate them)")
                 for r in ranking:
-                    if r["effect"] in pair:
-                        r["note"] = "cannot be told apart from " + pair[1 - pair.index(r["effect"])]
+                    if r["effect"] in amb:
+                        r["note"] = "cannot be told apart from " + amb[1 - amb.index(r["effect"])]
                 break
+            if m is None:
+                if step == 0:
+                    stab.append(st)
+                break
+            key = self.key(ranking_base.effects + (m,))
+            cand = self.evaluate(key, start=ranking_base.fit.outer, refine=True)
+            if cand.diverged or not cand.validation_error < current.validation_error:
+                why = (f"diverges on {', '.join(cand.diverged)}" if cand.diverged else
+                       f"its validation error {cand.validation_error:.3g} is not below the previous step's "
+                       f"{current.validation_error:.3g}")
+                ladder.append(self._ladder_row(f"+ {m}", cand, rejected=True, reason=why))
+                notes.append(f"ladder step + {m} rejected: with its parameters refined on the training replays it "
+                             f"{why}; the ladder stops at the step before")
+                diverged[f"+ {m}"] = cand.diverged
+                break
+            stab.append(st)
             if step == 0:
-                missing = best["effect"]
-            key = tuple(sorted(set(ranking_base.effects + (best["effect"],)), key=list(CATALOGUE).index))
+                missing = m
+                best = next(r for r in ranking if r["effect"] == m)
+                best["parameters"] = self.problem.describe(cand.fit, [m], model=False)  # the refined estimates
             ranking_base = self.evaluations[(key, False, False)]
-            current = self.evaluate(key, start=ranking_base.fit.outer, refine=True)
-            if step == 0:  # the reported parameters of the missing effect: the refined ones
-                best["parameters"] = {**describe({k: v for k, v in current.fit.outer.items()
-                                                  if k not in base.fit.outer}),
-                                      **{k: v for k, v in current.fit.coefs.items() if k not in base.fit.coefs}}
-            ladder.append({"step": f"+ {best['effect']}", "effects": list(current.effects),
-                           "validation_error": current.validation_error, "training_error": current.training_error})
-        if missing is None and not ambiguous:
+            current = cand
+            ladder.append(self._ladder_row(f"+ {m}", cand))
+        if missing is None and not ambiguous and not base.diverged:
             notes.insert(0, "no candidate effect lowers the out-of-sample error significantly: no significant "
                          "missing effect")
         if notes and any("too little excitation" in n for n in notes) and missing:
             notes.append(f"{missing} ranks first, but with little excitation the ranking is weak evidence")
         self.result = {"base": base, "final": current, "ranking": first_ranking or [], "missing": missing,
-                       "ambiguous": ambiguous, "ladder": ladder, "notes": notes,
-                       "seconds": time.perf_counter() - t0}
+                       "ambiguous": ambiguous, "ladder": ladder, "notes": notes, "stability": stab,
+                       "diverged": diverged, "seconds": time.perf_counter() - t0}
         return self.result
 
     # ------------------------------------------------------------------------------------------ report
     def report(self) -> dict:
         r = self.result
         base, final = r["base"], r["final"]
+        units = {"u": "m/s", "v": "m/s", "r": "rad/s", "psi": "rad", "track": "m"}
 
         def errs_rows():
             rows = []
-            for rec in base.errors:  # (the per-record 'diverged' flag is in the errors of baseline and final)
+            for rec in base.errors:
                 for c in CHANNELS + ("track",):
                     b, f = base.errors[rec][c], final.errors[rec][c]
-                    rows.append({"record": rec, "channel": c, "unit": {"u": "m/s", "v": "m/s", "r": "rad/s",
-                                                                         "psi": "rad", "track": "m"}[c],
+                    rows.append({"record": rec, "channel": c, "unit": units[c],
                                  "baseline_rmse": b["rmse"], "final_rmse": f["rmse"],
-                                 "baseline_nrmse": b["nrmse"], "final_nrmse": f["nrmse"]})
+                                 "baseline_nrmse": b["nrmse"], "final_nrmse": f["nrmse"],
+                                 "baseline_diverged": bool(base.errors[rec].get("diverged")),
+                                 "final_diverged": bool(final.errors[rec].get("diverged"))})
             return rows
 
         m = r["missing"]
-        if m:
-            top = r["ranking"][0] if r["ranking"] else {}
-            e1 = r["ladder"][1]["validation_error"]  # the step as refined (the ranking's is by equation error)
-            pars = list(top.get("parameters", {}).items())
-            verdict = (f"Missing effect: {m} (validation error {base.validation_error:.3g} -> {e1:.3g}, "
-                       f"{100 * (1 - e1 / base.validation_error):.0f} % lower; " +
-                       ", ".join(f"{k} = {v:.4g}" for k, v in pars[:6]) + (", ..." if len(pars) > 6 else "") + ")")
-            if len(r["ladder"]) > 2:
-                verdict += "; then " + ", ".join(s["step"][2:] for s in r["ladder"][2:])
+        stab = {s["step"]: s for s in r["stability"]}
+        if base.diverged:
+            verdict = (f"Diverged: the baseline model diverges when replayed through {len(base.diverged)} of "
+                       f"{len(base.errors)} validation record(s) ({', '.join(base.diverged)}); no missing effect "
+                       "can be named")
+        elif m:
+            e0, e1 = base.validation_error, r["ladder"][1]["validation_error"]
+            pars = list(self.problem.describe(final.fit, [m], model=False).items())
+            fmt = lambda v: f"{v:.4g}" if isinstance(v, (int, float)) else str(v)  # noqa: E731
+            verdict = (f"Missing effect: {m} (validation error {e0:.3g} -> {e1:.3g}, "
+                       f"{100 * (1 - e1 / e0):.0f} % lower; " +
+                       ", ".join(f"{k} = {fmt(v)}" for k, v in pars[:6]) + (", ..." if len(pars) > 6 else "") + ")")
+            if 1 in stab and stab[1]["k"] is not None:
+                verdict += f"; named in {stab[1]['k']} of {stab[1]['n']} with one validation record left out"
+            acc = [s for s in r["ladder"][2:] if not s.get("rejected")]
+            if acc:
+                verdict += "; then " + ", ".join(s["step"][2:] for s in acc)
         elif r["ambiguous"]:
             verdict = (f"The data cannot tell {r['ambiguous'][0]} from {r['ambiguous'][1]} apart; both lower the "
                        "validation error about equally")
         else:
             verdict = "No significant missing effect"
+            if 1 in stab and stab[1]["k"] is not None:
+                verdict += f" (the same in {stab[1]['k']} of {stab[1]['n']} with one validation record left out)"
+        params_units = self.problem.units(tuple(self.effects))
         return {
             "verdict": verdict,
             "baseline": {"validation_error": base.validation_error, "training_error": base.training_error,
-                         "effects": list(base.effects), "parameters": {**describe(base.fit.outer), **base.fit.coefs},
-                         "errors": base.errors},
+                         "effects": list(base.effects), "parameters": self.problem.describe(base.fit),
+                         "errors": base.errors, "diverged": base.diverged},
             "ranking": [{k: v for k, v in c.items() if k != "seconds"} for c in r["ranking"]],
+            "not_applicable": self.not_applicable,
             "missing_effect": m,
             "ambiguous": r["ambiguous"],
             "ladder": r["ladder"],
+            "stability": r["stability"],
+            "diverged": r["diverged"],
             "final": {"effects": list(final.effects), "validation_error": final.validation_error,
-                      "parameters": {**describe(final.fit.outer), **final.fit.coefs}, "errors": final.errors},
+                      "parameters": self.problem.describe(final.fit), "errors": final.errors,
+                      "diverged": final.diverged},
+            "units": params_units,
             "errors_table": errs_rows(),
             "notes": r["notes"],
             "mode": self.mode,
             "train": self.train_names,
             "validate": self.val_names if self.mode == "given" else [],
+            "depths_h_T": {i.name: i.h_T for i in self.problem.infos + self.val_infos},
             "seconds": r["seconds"],
         }
 
@@ -314,11 +437,12 @@ def predictions(doctor: "Doctor", ev: Evaluation) -> dict:
     """Each validation record's prediction by an evaluation's model (the fold's model when held out)."""
     out = {}
     if doctor.mode == "given":
-        for name, df in zip(doctor.val_names, doctor.val_df):
-            out[name] = doctor.problem.predict(ev.fit, df)
+        for name, df, info in zip(doctor.val_names, doctor.val_df, doctor.val_infos):
+            out[name] = doctor.problem.predict(ev.fit, df, info)
     else:
         for i, (name, df) in enumerate(zip(doctor.train_names, doctor.train_df)):
-            out[name] = doctor.folds[i].predict(ev.fold_fits[i], df) if ev.fold_fits else None
+            out[name] = (doctor.folds[i].predict(ev.fold_fits[i], df, doctor.problem.infos[i])
+                         if ev.fold_fits else None)
     return out
 
 
@@ -329,7 +453,6 @@ def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: 
     from pathlib import Path
 
     from . import plots
-    from .effects import catalogue_rows
     from .fit import residuals
     from .html import render_html
 
@@ -355,8 +478,13 @@ def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: 
             plots.compare(name, df, pb.get(name), pf.get(name) if fl else None,
                           "baseline" + (f" ({'+'.join(base.effects)})" if base.effects else ""),
                           f"with {fl}" if fl else ""),
-            f"{name}: measured against predicted", "Measured (dots), the baseline model (red) and the model with "
-            "the effects found (blue), replayed open loop with the record's rudder and propeller.", "compare")
+            f"{name}: measured against predicted",
+            ("Measured (dots), the baseline model (red) and the model with the effects found (blue), replayed open "
+             "loop with the record's rudder and propeller." if fl else
+             "Measured (dots) and the baseline model (red), replayed open loop with the record's rudder and "
+             "propeller (no effect was added).") +
+            (f" The baseline replay DIVERGED on this record and is not drawn." if name in base.diverged else ""),
+            "compare")
     res = residuals(doctor.problem, base.fit, doctor.train_names)
     add("residuals_time.png", plots.residuals_time(res), "Residual forces over time",
         "Measured inertial forces minus the baseline model's forces on the training records.", "residuals")
@@ -371,18 +499,56 @@ def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: 
     windows = worst_windows(curves)
     add("growth.png", plots.growth(curves, windows), "How the error grows along each record",
         "Mean normalised error of u, v, r and psi at each instant; the worst windows are shaded.", "growth")
-    add("ladder.png", plots.ladder(rep["ladder"]), "The error ladder", "Validation error of the model and of each "
-        "step with an effect added.", "ladder")
+    add("ladder.png", plots.ladder(rep["ladder"]), "The error ladder", "Validation error (mean NRMSE of u, v, r, "
+        "psi over the validation records) of the baseline and of each step with an effect added; a rejected step "
+        "(its error not lower) is hatched, a diverged one marked.", "ladder")
+    from .maneuver_metrics import maneuver_metrics
+
+    mm = []
+    for name, df in meas.items():
+        mm += maneuver_metrics(name, df, pb.get(name), pf.get(name), doctor.problem.L)
     for name, data in figs.items():
         (out / "figures" / name).write_bytes(data)
     html_report = {**_jsonable(rep), "title": f"Model doctor: {model} on {vessel}", "created_by":
                    "python -m study.diagnose", "vessel": vessel, "model": model,
                    "structure": doctor.problem.structure.name, "worst_windows": windows,
-                   "catalogue": catalogue_rows(), "figures": listing}
+                   "catalogue": catalogue_rows(doctor), "figures": listing, "maneuver_metrics": mm,
+                   "conventions": CONVENTIONS, "definitions": DEFINITIONS}
     (out / "report.json").write_text(json.dumps(html_report, indent=1, allow_nan=True, default=float),
                                      encoding="utf-8")
     (out / "report.html").write_text(render_html(html_report, figs), encoding="utf-8")
     return html_report
+
+
+#: shown on the report page beside the numbers they explain
+CONVENTIONS = ("Body axes x forward, y starboard; positions x0 north, y0 east; heading psi clockwise from north; "
+               "rudder delta > 0 turns the ship to starboard (r > 0); a current's direction is where it flows "
+               "TOWARDS, a wind's where it comes FROM, both clockwise from north; SI units, angles in radians "
+               "unless marked deg (docs/conventions.md)")
+DEFINITIONS = {
+    "NRMSE": "root-mean-square error of a replayed channel over the standard deviation of the measured channel "
+             "(or a floor when it hardly varies: 2 % of U0 for u and v, 2 % of U0/L for r, 0.02 rad for psi); at "
+             "most 10",
+    "validation error": "the mean NRMSE of u, v, r and psi, averaged over the validation records (held-out "
+                        "records when none are given), the model replayed open loop from each record's initial "
+                        "state with its measured rudder and propeller; lower is better; a diverged replay has none",
+    "training error": "the equation-error misfit on the training records: per equation (X, Y, N) the residual sum "
+                      "of squares over that of the model-free rows, averaged over the equations",
+    "improvement": "the relative fall of the validation error when a candidate effect is added (out of sample)",
+    "diverged": "a replay that overflows or leaves the envelope (speed over 5 U0, yaw rate over 20 U0/L)",
+    "track error": "RMS distance between replayed and measured positions [m]; its NRMSE is over the track's extent",
+}
+
+
+def catalogue_rows(doctor: "Doctor") -> list:
+    """The catalogue of the doctor's candidate effects: physics, parameters with units, how each enters, source,
+    and why it could not act here (if so)."""
+    out = []
+    for name, eff in doctor.effects.items():
+        out.append({"name": name, "physics": eff.physics, "parameters": eff.param_text(doctor.problem),
+                    "enters": eff.enters, "source": eff.source,
+                    "applies": doctor.not_applicable.get(name, "yes")})
+    return out
 
 
 def _slug(s: str) -> str:

@@ -73,7 +73,7 @@ def _report() -> dict:
         "mode": "held_out",
         "train": ["zz10_stbd", EVIL],
         "validate": ["zz20_port", "tc35_stbd & pull-out"],
-        "baseline": {"validation_error": 0.8, "training_error": 0.6,
+        "baseline": {"validation_error": 0.8, "training_error": 0.6, "effects": [], "diverged": [],
                      "parameters": {"X_vv": -0.0401234567, "Y_v": -0.315123, "N_r": -0.0499999}},
         "ranking": [
             {"effect": "current", "validation_error": 0.304, "improvement": 0.62, "significant": True,
@@ -101,8 +101,33 @@ def _report() -> dict:
         "worst_windows": [{"record": "zz20_port", "t_start": 120.0, "t_end": 180.5, "nrmse": 0.91}],
         "catalogue": [
             {"name": "current", "physics": "uniform steady current; the hull sees the relative velocity",
-             "parameters": "u_c, psi_c", "enters": "kinematics (ground = water + current)",
-             "source": "Fossen (2021), 10.3"},
+             "parameters": "u_c [m/s], psi_c [rad (towards, clockwise from north)]",
+             "enters": "kinematics (ground = water + current)", "source": "Fossen (2021), 10.3", "applies": "yes"},
+            {"name": "hull_nonlinear", "physics": "higher-order hull terms", "parameters": "none",
+             "enters": "extra coefficients", "source": "Abkowitz (1964)",
+             "applies": "the model already identifies every nonlinear hull term"},
+        ],
+        "units": {"u_c": "m/s", "psi_c": "rad (towards, clockwise from north)", "C_wind": "- (C / 0.5 rho A U^2)",
+                  "h_T": "- (water depth / draft)", "X_vv": "- (non-dimensional)", "Y_v": "- (non-dimensional)",
+                  "N_r": "- (non-dimensional)"},
+        "conventions": "Body axes x forward, y starboard; heading psi clockwise from north",
+        "definitions": {"NRMSE": "RMS error over the spread of the measured channel",
+                        "validation error": "the mean NRMSE over the validation records",
+                        "training error": "the equation-error misfit on the training records",
+                        "improvement": "the relative fall of the validation error",
+                        "diverged": "a replay that leaves the envelope",
+                        "track error": "RMS distance between replayed and measured positions"},
+        "stability": [{"step": 1, "k": 3, "n": 4, "text": "current: named in 3 of 4", "outcomes": []}],
+        "diverged": {"baseline": []},
+        "final": {"effects": ["current", "wind"], "validation_error": 0.30, "diverged": [],
+                  "parameters": {"X_vv": -0.041, "u_c": 0.41, "C_wind": 1.2e-05}},
+        "not_applicable": {"hull_nonlinear": "the model already identifies every nonlinear hull term"},
+        "depths_h_T": {"zz10_stbd": None, "zz20_port": 2.5},
+        "maneuver_metrics": [
+            {"record": "zz20_port", "metric": "first_overshoot", "unit": "deg", "measured": 8.03,
+             "baseline": 11.7, "final": 8.31},
+            {"record": "zz20_port", "metric": "second_overshoot", "unit": "deg", "measured": 15.3,
+             "baseline": float("nan"), "final": 14.3},
         ],
         "notes": ["Records resampled to 1 Hz.", "A & B < C"],
         "figures": [
@@ -278,6 +303,281 @@ def test_missing_and_unlisted_figures(figures):
     assert "Figure file ladder.png is missing." in page
     assert 'data-file="extra.png"' in page
     assert len(_parse(page).imgs) == 3
+
+
+# --------------------------------------------------------------------------------------------- the issue's rules
+
+
+def _section_html(page: str, sid: str) -> str:
+    """The HTML of ``<section id=sid>`` (up to its closing tag)."""
+    i = page.index(f'<section id="{sid}"')
+    return page[i:page.index("</section>", i)]
+
+
+def _visible_text(page: str) -> str:
+    """The page without its style sheet and its images' data (where "inf" could occur by chance)."""
+    import re
+
+    page = re.sub(r"<style>.*?</style>", "", page, flags=re.S)
+    return re.sub(r'src="data:[^"]*"', "", page)
+
+
+def _diverged_report() -> dict:
+    """The baseline diverges on zz20_port: no validation error (inf in the JSON), no improvement, no verdict."""
+    rep = _report()
+    inf = float("inf")
+    rep["verdict"] = ("Diverged: the baseline model diverges when replayed through 1 of 2 validation record(s) "
+                      "(zz20_port); no missing effect can be named")
+    rep["missing_effect"] = None
+    rep["baseline"] = dict(rep["baseline"], validation_error=inf, diverged=["zz20_port"])
+    rep["final"] = dict(rep["final"], effects=[], validation_error=inf, diverged=["zz20_port"])
+    rep["diverged"] = {"baseline": ["zz20_port"]}
+    rep["ladder"] = [{"step": "baseline", "effects": [], "validation_error": inf, "training_error": 0.6,
+                      "diverged": ["zz20_port"]}]
+    rep["stability"] = []
+    for c in rep["ranking"]:
+        c.update(improvement=None, significant=False, p_value=None, diverged=False, diverged_records=[])
+    rep["ranking"][1].update(validation_error=inf, diverged=True, diverged_records=["zz10_stbd"])
+    rep["errors_table"] = [
+        {"record": "zz20_port", "channel": "r", "unit": "rad/s", "baseline_rmse": inf, "final_rmse": inf,
+         "baseline_nrmse": inf, "final_nrmse": inf, "baseline_diverged": True, "final_diverged": True},
+        {"record": "zz10_stbd", "channel": "r", "unit": "rad/s", "baseline_rmse": 0.01, "final_rmse": 0.01,
+         "baseline_nrmse": 0.3, "final_nrmse": 0.3, "baseline_diverged": False, "final_diverged": False},
+    ]
+    for m in rep["maneuver_metrics"]:
+        m.update(baseline=float("nan"), final=float("nan"))
+    return rep
+
+
+def test_a_diverged_baseline_is_the_warning_headline_and_never_a_number(figures):
+    page = render_html(_diverged_report(), figures)
+    tree = _parse(page)
+    verdict = next(a for t, a in tree.tags if a.get("id") == "verdict")
+    assert verdict["class"].split() == ["verdict", "diverged"] and verdict["role"] == "alert"
+    head = page[page.index('id="verdict"'):page.index("</div>", page.index('id="verdict"'))]
+    assert "<strong class=\"diverged-word\">DIVERGED</strong>" in head and "zz20_port" in head
+    assert page.index('id="verdict"') < page.index('id="ladder"')
+    # the baseline's validation error, its fall and the improvements: "diverged" or n/a, never a % or a number
+    ladder = _section_html(page, "ladder")
+    row = ladder[ladder.index("<tbody>"):ladder.index("</tbody>")]
+    assert '<td class="num"><span class="dv">diverged</span></td>' in row  # its validation error
+    assert '<td class="num fallcell"><span class="dv">diverged</span></td>' in row  # its fall
+    assert "diverged</span> on zz20_port" in row and "%" not in row
+    cands = _section_html(page, "candidates")
+    assert 'Baseline (no added effect): validation error <span class="dv">diverged</span>' in cands
+    table = cands[cands.index('id="ranking"'):cands.index("</table>")]
+    assert "%" not in table
+    wind = table[table.index(">wind<"):].split("</tr>")[0]  # the candidate that diverges itself
+    assert wind.count('<span class="dv">diverged</span>') == 2 and "zz10_stbd" in wind
+    errors = _section_html(page, "errors")
+    bad = errors[errors.index("<td>zz20_port"):].split("</tr>")[0]
+    assert bad.count('<span class="dv">diverged</span>') == 5 and "%" not in bad
+    # the manoeuvre metrics of a diverged replay say so too (the measured ones stay)
+    man = _section_html(page, "maneuvers")
+    assert man.count('<span class="dv">diverged</span>') == 4 and "8.03" in man
+    # inf never printed anywhere on the page
+    import re
+
+    assert not re.search(r"\binf\b|Infinity", _visible_text(page)), re.findall(r".{40}\binf\b.{20}", page)
+
+
+def test_diverged_and_rejected_ladder_steps(figures):
+    rep = _report()
+    rep["ladder"].append({"step": "+ shallow_water", "effects": ["current", "wind", "shallow_water"],
+                          "validation_error": float("inf"), "training_error": 0.2, "diverged": ["zz20_port"],
+                          "rejected": True, "reason": "diverges on zz20_port"})
+    rep["ladder"][2].update(rejected=True, reason="its validation error 0.31 is not below the previous step's 0.304")
+    rep["diverged"] = {"baseline": [], "+ shallow_water": ["zz20_port"]}
+    page = render_html(rep, figures)
+    ladder = _section_html(page, "ladder")
+    rows = ladder[ladder.index("<tbody>"):].split("</tr>")
+    assert 'class="rejected"' in rows[2] and "is not below the previous step" in rows[2] and "62.5 %" in rows[2]
+    assert 'class="rejected diverged-row"' in rows[3] and rows[3].count('<span class="dv">diverged</span>') == 2
+    assert "%" not in rows[3]
+    assert "<b>rejected</b>" in ladder and "<b>diverged</b>" in ladder  # both terms defined under the table
+    # a headline of its own for the diverged step, the verdict (a missing effect) kept
+    box = page[page.index('id="divergence"'):page.index("</div>", page.index('id="divergence"'))]
+    assert "DIVERGED" in box and "+ shallow_water" in box and "zz20_port" in box
+    assert page.index('id="verdict"') < page.index('id="divergence"') < page.index('id="ladder"')
+    assert "verdict found" in page
+    # the caption of the ladder figure says hatched and marked only when the ladder has such steps
+    rep["figures"][1]["caption"] = ("Validation error of the baseline and of each step with an effect added; a "
+                                    "rejected step (its error not lower) is hatched, a diverged one marked.")
+    assert "hatched" in render_html(rep, figures) and "DIVERGED, with no bar" in render_html(rep, figures)
+    plain = _report()
+    plain["figures"][1]["caption"] = rep["figures"][1]["caption"]
+    cap = render_html(plain, figures)
+    assert "Validation error of the baseline and of each step with an effect added." in cap
+    assert "hatched" not in cap and "marked" not in cap
+
+
+def test_units_beside_every_parameter(figures):
+    rep = _report()
+    page = render_html(rep, figures)
+    cands = _section_html(page, "candidates")
+    assert 'u_c&nbsp;=&nbsp;0.4123</span> <span class="unit">[m/s]</span>' in cands
+    assert 'psi_c&nbsp;=&nbsp;0.5236</span> <span class="unit">[rad]<sup>' in cands
+    assert 'C_wind&nbsp;=&nbsp;1.235e-05</span> <span class="unit">[-]<sup>' in cands
+    # the long remarks of the units once, as footnotes under the ranking table
+    notes = cands[cands.index("</table>"):]
+    assert "C / 0.5 rho A U^2" in notes and "towards, clockwise from north" in notes
+    # baseline and final parameters side by side, each with its unit
+    data = _section_html(page, "data")
+    row = data[data.index('<td class="param">u_c</td>'):].split("</tr>")[0]
+    assert "0.41" in row and "m/s" in row
+    row = data[data.index('<td class="param">X_vv</td>'):].split("</tr>")[0]
+    assert "-0.04012" in row and "-0.041" in row and "- (non-dimensional)" in row
+    # the catalogue's parameter text keeps its units
+    cat = _section_html(page, "catalogue")
+    assert 'u_c <span class="unit">[m/s]</span>' in cat
+    # and a verdict naming parameters gets their units
+    rep["verdict"] = "Missing effect: current (u_c = 0.4123, psi_c = 0.52)"
+    v = render_html(rep, figures)
+    assert 'u_c = 0.4123 <span class="unit">[m/s]</span>' in v
+    # no unit known: no empty brackets
+    rep["units"] = {}
+    assert "u_c&nbsp;=&nbsp;0.4123</span><br>" in render_html(rep, figures)
+
+
+def test_definitions_under_each_table_and_conventions_on_top(figures):
+    rep = _report()
+    page = render_html(rep, figures)
+    d = rep["definitions"]
+    cands = _section_html(page, "candidates")
+    after = cands[cands.index("</table>"):]
+    assert d["validation error"] in after and d["improvement"] in after
+    assert d["diverged"] not in after  # nothing diverged here: not defined where it is not used
+    ladder = _section_html(page, "ladder")
+    after = ladder[ladder.index("</table>"):]
+    assert d["validation error"] in after and d["training error"] in after
+    errors = _section_html(page, "errors")
+    after = errors[errors.index("</table>"):]
+    assert d["NRMSE"] in after
+    assert 'id="definitions"' in page  # and all of them once more at the end
+    conv = page.index('id="conventions"')
+    assert page.index('id="verdict"') < conv < page.index('id="ladder"')
+    assert rep["conventions"] in page[conv:page.index("</p>", conv)]
+    # without definitions in the report: none invented, no empty footnote
+    del rep["definitions"]
+    cands = _section_html(render_html(rep, figures), "candidates")
+    assert "<b>validation error</b>" not in cands and "<b>improvement</b>" not in cands
+    assert '<ul class="defs"></ul>' not in cands
+
+
+def test_maneuver_metrics_section(figures):
+    page = render_html(_report(), figures)
+    assert "Manoeuvres in the ship&#x27;s terms" in page or "Manoeuvres in the ship's terms" in page
+    man = _section_html(page, "maneuvers")
+    assert man.count('<table class="maneuver-metrics">') == 1
+    assert man.count('<td class="record">zz20_port</td>') == 2
+    assert "first_overshoot" in man and "8.03" in man and "11.7" in man and "n/a" in man
+    assert "heading change beyond the switch heading" in man  # the metrics defined under the table
+    assert page.index('id="errors"') < page.index('id="maneuvers"') < page.index('id="figures"')
+    rep = _report()
+    rep["maneuver_metrics"] = []
+    assert "No turning circle or zigzag" in render_html(rep, figures)
+
+
+def test_stability_beside_the_verdict_and_in_the_ladder(figures):
+    page = render_html(_report(), figures)
+    head = page[page.index('id="verdict"'):page.index("</div>", page.index('id="verdict"'))]
+    assert "named in 3 of 4 with one validation record left out" in head
+    ladder = _section_html(page, "ladder")
+    rows = ladder[ladder.index("<tbody>"):].split("</tr>")
+    assert "named in 3 of 4" in rows[1] and "named in" not in rows[0] and "named in" not in rows[2]
+
+
+def test_not_applicable_depths_and_catalogue_applies(figures):
+    page = render_html(_report(), figures)
+    cands = _section_html(page, "candidates")
+    assert "hull_nonlinear" in cands and "the model already identifies every nonlinear hull term" in cands
+    cat = _section_html(page, "catalogue")
+    assert "<th>Applies here</th>" in cat and "no: the model already identifies" in cat
+    data = _section_html(page, "data")
+    assert "zz20_port: h/T = 2.5" in data and "zz10_stbd: not given (deep water)" in data
+
+
+def test_no_caption_for_a_curve_that_is_not_drawn(figures):
+    rep = _report()
+    rep["final"] = dict(rep["final"], effects=[])  # no effect added: compare plots have no blue curve
+    rep["figures"][0]["caption"] = ("Measured (dots), the baseline model (red) and the model with the effects "
+                                    "found (blue), replayed open loop.")
+    page = render_html(rep, figures)
+    assert "blue" not in page and "Measured (dots) and the baseline model (red), replayed open loop." in page
+    rep["final"]["effects"] = ["current"]
+    assert "the model with the effects found (blue)" in render_html(rep, figures)
+
+
+def _plot_inputs():
+    np = pytest.importorskip("numpy")
+    pd = pytest.importorskip("pandas")
+    t = np.arange(0.0, 60.0, 0.5)
+    meas = pd.DataFrame({"time": t, "u": 1 + 0 * t, "v": 0.1 * np.sin(t / 5), "r": 0.01 * np.cos(t / 5),
+                         "psi": 0.1 * np.sin(t / 5), "x0": t, "y0": np.sin(t / 5)})
+    steps = [{"step": "baseline", "validation_error": 0.8, "diverged": []},
+             {"step": "+ current", "validation_error": 0.3, "diverged": []},
+             {"step": "+ wind", "validation_error": 0.35, "diverged": [], "rejected": True},
+             {"step": "+ yaw_bias", "validation_error": float("inf"), "diverged": ["zz"], "rejected": True}]
+    return np, t, meas, steps
+
+
+def _texts(fig) -> list[str]:
+    out = [t.get_text() for t in fig.findobj(lambda a: hasattr(a, "get_text"))]
+    return [x for x in out if x]
+
+
+def test_figures_show_diverged_and_rejected_steps(monkeypatch):
+    """The figures say what diverged and what was rejected, with a legend and a unit on every axis."""
+    from study.doctor import plots
+
+    np, t, meas, steps = _plot_inputs()
+    monkeypatch.setattr(plots, "_png", lambda fig: fig)  # the figures themselves, to look inside
+
+    fig = plots.ladder(steps)
+    texts = _texts(fig)
+    assert "DIVERGED" in texts and any("rejected" in x for x in texts)
+    bars = [p for p in fig.axes[0].patches if p.get_height() > 0]
+    assert len(bars) == 3 and all(np.isfinite(b.get_height()) for b in bars)  # none for the diverged step
+    assert [b.get_hatch() for b in bars] == [None, None, "///"]  # the rejected one hatched
+    assert fig.axes[0].get_ylim()[1] < 2.0  # scaled to the finite errors, not to inf
+    labels = [x.get_text() for x in fig.legends[0].get_texts()]
+    assert labels == ["baseline", "effect added (accepted)", "rejected step", "diverged (no error)"]
+    assert "[-]" in fig.axes[0].get_ylabel()
+    # no rejected or diverged step: the legend does not name them
+    labels = [x.get_text() for x in plots.ladder(steps[:2]).legends[0].get_texts()]
+    assert labels == ["baseline", "effect added (accepted)"]
+
+    fig = plots.compare("zz", meas, None, None, "baseline", "")
+    labels = [x.get_text() for x in fig.legends[0].get_texts()]
+    assert labels == ["measured", "baseline: DIVERGED (not drawn)"]  # no "final" curve named when none is drawn
+    fig = plots.compare("zz", meas, meas, meas * 1.01, "baseline", "with current")
+    assert [x.get_text() for x in fig.legends[0].get_texts()] == ["measured", "baseline", "with current"]
+    ylabels = [a.get_ylabel() for a in fig.axes]
+    assert "r [deg/s]" in ylabels and "psi [deg]" in ylabels and "u [m/s]" in ylabels
+    for ax in fig.axes:  # units on every axis that has a label
+        for lab in (ax.get_xlabel(), ax.get_ylabel()):
+            assert not lab or ("[" in lab and "]" in lab), lab
+
+    fig = plots.growth([("zz", t, np.full(len(t), np.nan), None)], [])
+    assert any("DIVERGED" in x for x in _texts(fig))
+    fig = plots.residuals_states([{"record": 0, "name": "zz", "first": True, "time": t, "X": t, "Y": t, "N": t,
+                                   "u": t, "r": t}], ("u", "r"))
+    assert [a.get_xlabel() for a in fig.axes[-2:]] == ["u [m/s]", "r [deg/s]"]
+    assert fig.axes[0].get_ylabel() == "residual X [N]" and fig.legends
+
+
+def test_figures_fit_the_page():
+    from study.doctor import plots
+
+    np, t, meas, steps = _plot_inputs()
+    res = [{"record": i, "name": f"rec{i}", "first": True, "time": t, "X": t, "Y": t, "N": t, "u": t, "v": t,
+            "r": t, "delta": t, "psi": t} for i in range(3)]
+    pngs = [plots.ladder(steps), plots.compare("zz", meas, meas, None, "baseline", ""),
+            plots.growth([("a", t, t, t), ("b", t, t, None)], []), plots.residuals_time(res),
+            plots.residuals_states(res, ("u", "v", "r", "delta", "psi"))]
+    for png in pngs:
+        w, h = _png_size(png)
+        assert 500 < w <= 1100 and 300 < h <= 1100, (w, h)  # about the page's width at 1:1, never tiny
 
 
 # --------------------------------------------------------------------------------------------- in Chromium

@@ -37,7 +37,7 @@ from typing import Any
 __all__ = ["fmt_num", "fmt_pct", "render_html"]
 
 NA = "n/a"
-DIVERGED = '<span class="diverged">diverged</span>'
+DIVERGED = '<span class="dv">diverged</span>'
 
 #: figure sections in display order, with their headings; any other section follows, in order of appearance
 SECTIONS: dict[str, str] = {
@@ -194,17 +194,30 @@ def _value(v: Any) -> str:
     return _num(v)
 
 
-def _unit(name: Any, units: Mapping) -> str:
-    """The unit of a parameter as HTML (``[m/s]``; a remark alone in parentheses as it is), or empty."""
+def _unit(name: Any, units: Mapping, notes: dict | None = None) -> str:
+    """The unit of a parameter as HTML (``[m/s]``; a remark alone in parentheses as it is), or empty. With
+    ``notes`` (remark -> number, filled here) a unit ``"- (non-dimensional, ...)"`` is shown as ``[-]`` and a
+    footnote number, its remark to be listed once under the table (:func:`_unit_notes`)."""
     u = units.get(str(name)) if isinstance(units, Mapping) else None
     if u is None or str(u).strip() == "":
         return ""
     u = str(u).strip()
+    m = re.fullmatch(r"([^()]+?)\s*\((.+)\)", u)
+    if notes is not None and m:
+        k = notes.setdefault(m.group(2), len(notes) + 1)
+        return f'<span class="unit">[{_e(m.group(1))}]<sup>{k}</sup></span>'
     text = u if u.startswith("(") else f"[{u}]"
     return f'<span class="unit">{_e(text)}</span>'
 
 
-def _params(p: Any, units: Mapping | None = None) -> str:
+def _unit_notes(notes: Mapping) -> str:
+    if not notes:
+        return ""
+    items = "; ".join(f"<sup>{k}</sup>&nbsp;{_e(t)}" for t, k in notes.items())
+    return f'<p class="defs"><b>units</b>: {items}.</p>'
+
+
+def _params(p: Any, units: Mapping | None = None, notes: dict | None = None) -> str:
     """Parameters as ``name = value [unit]`` lines, 4 significant digits."""
     d = _dict(p)
     if not d:
@@ -212,7 +225,7 @@ def _params(p: Any, units: Mapping | None = None) -> str:
     units = units or {}
     items = []
     for k, v in d.items():
-        u = _unit(k, units)
+        u = _unit(k, units, notes)
         items.append(f'<span class="param">{_e(k)}&nbsp;=&nbsp;{_value(v)}</span>' + (f" {u}" if u else ""))
     return "<br>".join(items)
 
@@ -224,14 +237,14 @@ def _defs(r: dict, terms: Iterable[str], extra: Iterable[tuple[str, str]] = ()) 
     items += [(t, x) for t, x in extra if x]
     if not items:
         return ""
-    lis = "".join(f"<li><b>{_e(t[:1].upper() + t[1:])}</b>: {_e(x)}.</li>" for t, x in items)
+    lis = "".join(f"<li><b>{_e(t)}</b>: {_e(str(x).rstrip('. '))}.</li>" for t, x in items)
     return f'<ul class="defs">{lis}</ul>'
 
 
 def _pdefs(r: dict, term: str) -> str:
     d = _dict(r.get("definitions"))
     x = d.get(term)
-    return f'<p class="defs"><b>{_e(term[:1].upper() + term[1:])}</b>: {_e(x)}.</p>' if isinstance(x, str) and x else ""
+    return f'<p class="defs"><b>{_e(term)}</b>: {_e(x.rstrip(". "))}.</p>' if isinstance(x, str) and x else ""
 
 
 # --------------------------------------------------------------------------------------------- divergence
@@ -270,9 +283,10 @@ def _divergences(r: dict) -> list[tuple[str, list[str]]]:
     out: list[tuple[str, list[str]]] = []
     seen: set[str] = set()
 
-    def add(what: str, recs: list[str]) -> None:
-        if recs and what not in seen:
-            seen.add(what)
+    def add(what: str, recs: list[str], key: str | None = None) -> None:
+        key = what if key is None else key
+        if recs and key not in seen:
+            seen.add(key)
             out.append((what, recs))
 
     add("the baseline model", _base_diverged(r))
@@ -283,11 +297,12 @@ def _divergences(r: dict) -> list[tuple[str, list[str]]]:
             if not recs and v is not None and math.isinf(v):
                 recs = ["?"]
             tag = " (rejected)" if s.get("rejected") else ""
-            add(f"ladder step {s.get('step')}{tag}", recs)
+            add(f"ladder step {s.get('step')}{tag}", recs, f"step {s.get('step')}")
     for step, recs in _dict(r.get("diverged")).items():
         if str(step) != "baseline":
-            add(f"ladder step {step}", _recs(recs))
-    add("the final model", _final_diverged(r))
+            add(f"ladder step {step}", _recs(recs), f"step {step}")
+    if not _no_final_model(r):  # else it is the baseline, said above
+        add("the final model", _final_diverged(r))
     for c in _list(r.get("ranking")):
         if isinstance(c, Mapping) and (c.get("diverged") is True or _recs(c.get("diverged_records"))):
             add(f"candidate {c.get('effect')}", _recs(c.get("diverged_records")) or ["?"])
@@ -344,6 +359,18 @@ def _named_in(s: Mapping | None, long: bool = False) -> str:
     return _e(t) if isinstance(t, str) and long else ""
 
 
+def _with_units(text: str, units: Mapping) -> str:
+    """Escaped ``text`` with the unit after each ``name = number`` of a parameter that has one."""
+    if not units:
+        return text
+
+    def put(m: re.Match) -> str:
+        u = _unit(m.group(1), units)
+        return m.group(0) + (f" {u}" if u else "")
+
+    return re.sub(r"\b([A-Za-z_][A-Za-z0-9_]*) = (-?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)", put, text)
+
+
 def _verdict(r: dict) -> str:
     missing = r.get("missing_effect")
     missing = None if missing is None or str(missing).strip() == "" else str(missing)
@@ -352,7 +379,7 @@ def _verdict(r: dict) -> str:
     stab = _stability(r).get(1)
     named = _named_in(stab, long=True)
     named_html = f'<br><span class="detail stability">{named}</span>' if named else ""
-    role, extra = "status", ""
+    role, extra, show_text = "status", "", True
 
     if _verdict_diverged(r):
         recs = _base_diverged(r)
@@ -360,8 +387,14 @@ def _verdict(r: dict) -> str:
         of = f" {len(recs)} of {n_val}" if recs and n_val >= len(recs) and recs != ["?"] else ""
         on = [x for x in recs if x != "?"]
         where = f" ({_names(on)})" if on else ""
-        head = (f'<strong class="diverged-word">DIVERGED</strong>: the baseline model diverges when replayed '
-                f'through{of} validation record(s){where}; no missing effect can be named')
+        vt = r.get("verdict")
+        if isinstance(vt, str) and vt.strip().lower().startswith("diverged"):
+            rest = re.sub(r"^\s*diverged\s*:?\s*", "", vt, flags=re.I)
+            head = f'<strong class="diverged-word">DIVERGED</strong>{": " + _e(rest) if rest else ""}'
+            show_text = False
+        else:
+            head = (f'<strong class="diverged-word">DIVERGED</strong>: the baseline model diverges when replayed '
+                    f'through{of} validation record(s){where}; no missing effect can be named')
         cls, role = "verdict diverged", "alert"
         others = [d for d in _divergences(r) if d[0] != "the baseline model"]
         if others:
@@ -391,8 +424,8 @@ def _verdict(r: dict) -> str:
         cls = "verdict ambiguous"
     elif "missing_effect" in r or ranking:
         same = _named_in(stab)
-        same = f'<br><span class="detail stability">the same with one validation record left out: ' \
-               f'{same.replace("named in ", "")}</span>' if same else ""
+        same = (f'<br><span class="detail stability">the same in {same.replace("named in ", "")} refits with one '
+                'validation record left out</span>') if same else ""
         head = f"<strong>No significant missing effect</strong>{same}"
         cls = "verdict none"
     else:
@@ -400,7 +433,8 @@ def _verdict(r: dict) -> str:
         cls = "verdict unknown"
 
     text = r.get("verdict")
-    text = f'<p class="verdict-text">{_e(text)}</p>' if text not in (None, "") else ""
+    text = (f'<p class="verdict-text">{_with_units(_e(text), _dict(r.get("units")))}</p>'
+            if text not in (None, "") and show_text else "")
     if not head and not text:
         text = '<p class="verdict-text">No verdict in this report.</p>'
     if cls != "verdict diverged" and isinstance(r.get("verdict"), str) and "validation error" in r["verdict"]:
@@ -513,7 +547,7 @@ def _ranking(r: dict) -> str:
     b = _dict(r.get("baseline"))
     units = _dict(r.get("units"))
     missing = r.get("missing_effect")
-    rows, any_div = [], False
+    rows, any_div, notes = [], False, {}
     for i, c in enumerate(cands, 1):
         c = c if isinstance(c, Mapping) else {"effect": c}
         div_recs = _recs(c.get("diverged_records"))
@@ -537,12 +571,14 @@ def _ranking(r: dict) -> str:
                     f'<td class="num">{val}</td>'
                     f'<td class="num">{_pct(c.get("improvement"), div)}</td>'
                     f'<td>{mark}</td><td class="num">{_fmt_p(c.get("p_value"))}</td>'
-                    f'<td class="params">{_params(c.get("parameters"), units)}</td><td>{_e(c.get("note"))}</td></tr>')
+                    f'<td class="params">{_params(c.get("parameters"), units, notes)}</td>'
+                    f'<td>{_e(c.get("note"))}</td></tr>')
     na = {str(k): v for k, v in _dict(r.get("not_applicable")).items()}
     na_html = ""
     if na:
         lis = "".join(f'<li><b>{_e(k)}</b>: {_e(v)}</li>' for k, v in na.items())
-        na_html = f'<p class="legend">Not tried here (cannot act on this model or these records):</p><ul class="na">{lis}</ul>'
+        na_html = ('<p class="legend">Not tried here (cannot act on this model or these records):</p>'
+                   f'<ul class="na">{lis}</ul>')
     if not rows and not b:
         return _section("Candidate effects", na_html, "candidates") if na_html else ""
     base_line = ""
@@ -568,7 +604,8 @@ def _ranking(r: dict) -> str:
     extra = [("p-value", "of the paired t-test of the per-record validation errors against the baseline's "
                          "(n/a when there are too few validation records to run it)")]
     foot = _defs(r, ["validation error", "improvement"] + (["diverged"] if any_div else []), extra)
-    return _section("Candidate effects", base_line + legend + table + foot + na_html, "candidates")
+    return _section("Candidate effects", base_line + legend + table + _unit_notes(notes) + foot + na_html,
+                    "candidates")
 
 
 def _errors(r: dict) -> str:
@@ -640,7 +677,8 @@ def _maneuvers(r: dict) -> str:
             lines[j] = '<td class="num">'.join(cells)
         table = "\n".join(lines)
     shown = {str(x.get("metric")) for x in rows}
-    desc = [(m, f"{d} [{u}]") for m, u, d in TURNING_METRICS + ZIGZAG_METRICS if m in shown]
+    desc = [f"<b>{_e(m)}</b> [{_e(u)}]: {_e(d)}" for m, u, d in TURNING_METRICS + ZIGZAG_METRICS if m in shown]
+    desc = f'<p class="defs">{"; ".join(desc)}.</p>' if desc else ""
     fin = _dict(r.get("final")).get("effects")
     base_eff = _dict(r.get("baseline")).get("effects")
     same = isinstance(fin, list) and isinstance(base_eff, list) and sorted(map(str, fin)) == sorted(map(str, base_eff))
@@ -649,7 +687,7 @@ def _maneuvers(r: dict) -> str:
              'replays of the baseline and of the final model (open loop, the measured rudder). n/a: the record '
              'cannot carry the metric.' + (' No effect was added: the final model is the baseline.' if same else '')
              + '</p>')
-    foot = _defs(r, ["diverged"] if (bdiv or fdiv) else [], desc)
+    foot = desc + _defs(r, ["diverged"] if (bdiv or fdiv) else [])
     return _section("Manoeuvres in the ship's terms", intro + table + foot, "maneuvers")
 
 
@@ -692,6 +730,8 @@ def _caption(meta: Mapping, r: dict) -> Any:
         rej = any(s.get("rejected") is True for s in steps)
         div = any(_step_diverged(s, i, r) for i, s in enumerate(steps))
         head = cap.split(";")[0].rstrip(". ")
+        if len(steps) <= 1:
+            head = re.sub(r" and of each step with an effect added$", " (no effect was added)", head)
         bits = (["a rejected step (its error not lower) is hatched"] if rej else []) + \
                (["a diverged step is marked DIVERGED, with no bar"] if div else [])
         cap = head + ("; " + "; ".join(bits) if bits else "") + "."
@@ -758,7 +798,7 @@ def _worst(r: dict) -> str:
 
 
 def _catalogue(r: dict) -> str:
-    rows = []
+    rows, notes = [], {}
     units = _dict(r.get("units"))
     has_applies = any(isinstance(c, Mapping) and "applies" in c for c in _list(r.get("catalogue")))
     for c in _list(r.get("catalogue")):
@@ -766,12 +806,12 @@ def _catalogue(r: dict) -> str:
             continue
         params = c.get("parameters")
         if isinstance(params, Mapping):
-            params = _params(params, units)
+            params = _params(params, units, notes)
         elif isinstance(params, (list, tuple)):
-            params = ", ".join(f"{_e(p)}{' ' + _unit(p, units) if _unit(p, units) else ''}" for p in params
+            params = ", ".join(f"{_e(p)}{' ' + _unit(p, units, notes) if _unit(p, units) else ''}" for p in params
                                if p is not None)
         else:
-            params = _e(params)
+            params = _param_text(params, notes)
         applies = ""
         if has_applies:
             a = c.get("applies")
@@ -789,7 +829,21 @@ def _catalogue(r: dict) -> str:
     table = ('<table class="catalogue">\n<thead><tr><th>Effect</th><th>Physics</th><th>Parameters [unit]</th>'
              '<th>How it enters the model</th><th>Source</th>' + ("<th>Applies here</th>" if has_applies else "")
              + '</tr></thead>\n<tbody>\n' + "\n".join(rows) + "\n</tbody></table>")
-    return _section("Catalogue of candidate effects", table, "catalogue")
+    return _section("Catalogue of candidate effects", table + _unit_notes(notes), "catalogue")
+
+
+_PARAM_ITEM = re.compile(r"\s*([^,\[\]]+?)\s*\[([^\[\]]*)\]\s*(?:,|$)")
+
+
+def _param_text(text: Any, notes: dict) -> str:
+    """A catalogue row's ``"name [unit], name [unit]"`` with its units as in the ranking (a long remark as a
+    footnote number); any other text escaped as it is."""
+    if not isinstance(text, str):
+        return _e(text)
+    items = _PARAM_ITEM.findall(text)
+    if not items or "".join(_PARAM_ITEM.sub("", text).split()):
+        return _e(text)
+    return ", ".join(f'{_e(n)} {_unit(n, {n: u}, notes)}' for n, u in items)
 
 
 def _notes(r: dict) -> str:
@@ -893,14 +947,15 @@ ul.div-list { margin: .3rem 0; padding-left: 1.3rem; }
 table { border-collapse: collapse; width: 100%; margin: .4rem 0 .3rem; font-size: .92rem; }
 th, td { border-bottom: 1px solid #d4d4d4; padding: .3rem .45rem; text-align: left; vertical-align: top; }
 thead th { border-bottom: 2px solid #777; background: #f6f6f6; font-weight: 600; }
-td { overflow-wrap: anywhere; }
+td { overflow-wrap: break-word; }
+table.ladder td:first-child { white-space: nowrap; }
 td.num, th.num { text-align: right; font-variant-numeric: tabular-nums; }
 td.num { white-space: nowrap; overflow-wrap: normal; }
 td.params, .param { font-variant-numeric: tabular-nums; font-family: ui-monospace, "DejaVu Sans Mono",
                     "Liberation Mono", monospace; font-size: .85rem; overflow-wrap: normal; }
 .param { white-space: nowrap; }
-.unit { font-family: system-ui, -apple-system, "Segoe UI", "DejaVu Sans", sans-serif; font-size: .8rem;
-        color: #555; }
+span.unit { font-family: system-ui, -apple-system, "Segoe UI", "DejaVu Sans", sans-serif; font-size: .8rem;
+             color: #555; display: inline-block; }
 td.params { line-height: 1.35; }
 td.effect { font-weight: 600; overflow-wrap: normal; }
 td.source { font-size: .85rem; color: #333; }
@@ -912,14 +967,13 @@ tr.chosen td.effect::after { content: " \\2190 missing effect"; font-weight: nor
 tr.diverged-row td { background: #fdecee; }
 tr.rejected td { background: repeating-linear-gradient(135deg, #fff 0, #fff 6px, #f1f1f1 6px, #f1f1f1 9px);
                  color: #555; }
-.diverged { color: #b00020; font-weight: 700; text-transform: uppercase; letter-spacing: .03em;
-            font-size: .88em; }
+.dv { color: #b00020; font-weight: 700; text-transform: uppercase; letter-spacing: .03em; font-size: .88em; }
 .rejected-word { color: #8a4b00; font-weight: 700; }
 td.status { font-size: .88rem; }
 .sig { color: #1d6b3a; font-weight: 700; white-space: nowrap; }
 .muted { color: #777; }
 .legend { font-size: .88rem; color: #444; }
-.defs { font-size: .84rem; color: #444; margin: .2rem 0 1rem; }
+.defs { font-size: .84rem; color: #444; margin: .25rem 0 .35rem; }
 ul.defs { list-style: none; padding-left: 0; }
 ul.defs li { margin: .12rem 0; }
 ul.na { font-size: .88rem; color: #444; margin-top: .1rem; }

@@ -1,0 +1,105 @@
+"""Hidden-effect cases for the model doctor's tests, built from each effect's ``example`` block
+(``conf/effect/*.yaml``): the truth simulator (``study.sim``, not the doctor's hooks) makes the records, so an
+effect is found only if the doctor's physics matches the simulator's.
+
+An ``example`` may give
+- ``environment``: effects of the truth simulator (``study.sim.effects``; ``*_U0`` keys in units of U0);
+- ``vessel``: changes to the truth vessel's config, ``{section: {key: {times: f} | {plus: x} | value}}``;
+- ``rudder_log: command``: the records' rudder column holds the command (an autopilot log);
+- ``depth_h_T: {train: [...], validate: [...]}``: each record at its own h/T, with a ``depth`` column;
+- ``model_omits: terms``: the model lacks the effect's terms (hull_nonlinear's per-kind list);
+- ``expect``: parameter -> ``{value | value_U0 | truth: true, rel | abs | abs_deg}``.
+"""
+from __future__ import annotations
+
+import copy
+import math
+
+from study.measure import MeasurementModel
+from study.pipeline import resolve_effects
+from study.schema import Record
+from study.sim import load_vessel, read_config, simulate
+from study.sim.effects import ShallowWater
+
+VESSEL = read_config("vessel", "kvlcc2_l7")
+U0 = float(VESSEL["operation"]["U0"])
+TRAIN = ("zigzag_10_10", "zigzag_20_20", "random_rudder")
+VALIDATE = ("zigzag_20_10_port", "turning_35")
+KNOWN = {"name": "known", "type": "kind", "equations": {}}
+MMG_HULL = read_config("model", "mmg_hull")
+
+
+def changed_vessel(cfg: dict, changes: dict) -> dict:
+    out = copy.deepcopy(cfg)
+    for sec, kv in (changes or {}).items():
+        for k, ch in kv.items():
+            v = float(out[sec][k])
+            if isinstance(ch, dict):
+                v = v * float(ch.get("times", 1.0)) + float(ch.get("plus", 0.0))
+            else:
+                v = float(ch)
+            out[sec][k] = v
+    return out
+
+
+def make_records(example: dict, seed: int = 0, duration: float = 300.0, vessel_cfg: dict = VESSEL):
+    """(training Records, validation Records, truth vessel config) of a hidden-effect example."""
+    cfg = changed_vessel(vessel_cfg, example.get("vessel"))
+    env = resolve_effects(example.get("environment") or [], float(cfg["operation"]["U0"]))
+    depths = example.get("depth_h_T") or {}
+    out = []
+    for role, mans in (("train", TRAIN), ("validate", VALIDATE)):
+        hs = depths.get(role) or [None] * len(mans)
+        for i, (m, h) in enumerate(zip(mans, hs)):
+            effects = ([ShallowWater(h_T=float(h))] if h else []) + list(env)
+            clean = simulate(load_vessel(cfg, effects), m, duration=duration)
+            if example.get("rudder_log") == "command":
+                clean["delta"] = clean["delta_cmd"]
+            df = MeasurementModel(dt=0.1, noise_level=0.01, seed=seed + len(out)).apply(clean.drop(columns="delta_cmd"))
+            if h:
+                df["depth"] = float(h) * float(cfg["particulars"]["d"])
+            out.append((role, Record(data=df, meta={"name": f"{role}_{i}_{m}"})))
+    return [r for k, r in out if k == "train"], [r for k, r in out if k == "validate"], cfg
+
+
+def model_for(example: dict, identified: bool, terms: dict) -> dict:
+    """The model of a case: ``known`` or the identified MMG hull; without the effect's terms if it omits them."""
+    if not example.get("model_omits"):
+        return MMG_HULL if identified else KNOWN
+    omit = {eq: list(cs) for eq, cs in terms.items()}
+    if not identified:
+        return {"name": "linear_hull", "type": "kind", "equations": {}, "omit": omit}
+    drop = {c for cs in terms.values() for c in cs}
+    eqs = {eq: [c for c in cs if c not in drop] for eq, cs in MMG_HULL["equations"].items()}
+    return {"name": "mmg_linear_hull", "type": "kind", "kind": "mmg", "equations": eqs, "omit": omit}
+
+
+def check_expectations(expect: dict, params: dict, truth_vessel) -> list:
+    """Failures (strings) of a case's expectations on the reported parameters."""
+    bad = []
+    names = truth_vessel.param_names
+    for k, e in (expect or {}).items():
+        if k not in params:
+            bad.append(f"{k} not reported (have {sorted(params)})")
+            continue
+        got = params[k]
+        if isinstance(e.get("value"), str):
+            if got != e["value"]:
+                bad.append(f"{k} = {got}, expected {e['value']}")
+            continue
+        if e.get("truth"):
+            want = float(truth_vessel.params[names.index(k)])
+        elif "value_U0" in e:
+            want = float(e["value_U0"]) * float(truth_vessel.U0)
+        else:
+            want = float(e["value"])
+        if "abs_deg" in e:
+            err = abs((float(got) - want + 180.0) % 360.0 - 180.0)
+            ok = err <= float(e["abs_deg"])
+        elif "abs" in e:
+            ok = abs(float(got) - want) <= float(e["abs"])
+        else:
+            ok = abs(float(got) - want) <= float(e.get("rel", 0.2)) * abs(want)
+        if not (ok and math.isfinite(float(got))):
+            bad.append(f"{k} = {float(got):.4g}, truth {want:.4g} ({e})")
+    return bad

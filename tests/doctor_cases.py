@@ -8,7 +8,7 @@ An ``example`` may give
 - ``rudder_log: command``: the records' rudder column holds the command (an autopilot log);
 - ``depth_h_T: {train: [...], validate: [...]}``: each record at its own h/T, with a ``depth`` column;
 - ``model_omits: terms``: the model lacks the effect's terms (hull_nonlinear's per-kind list);
-- ``expect``: parameter -> ``{value | value_U0 | truth: true, rel | abs | abs_deg}``.
+- ``expect``: parameter -> ``{value | value_U0 | truth: true, rel | abs | abs_deg, models}``.
 """
 from __future__ import annotations
 
@@ -39,6 +39,22 @@ def changed_vessel(cfg: dict, changes: dict) -> dict:
             else:
                 v = float(ch)
             out[sec][k] = v
+    return out
+
+
+def perturbed_prior(cfg: dict, model: dict, rel: float = 0.2) -> dict:
+    """The vessel config a user would have: the model's free coefficients ``rel`` off the truth, alternately
+    above and below (a published set is never exact), so an identified hull is not anchored to the truth."""
+    from study.sim import get_kind
+
+    out = copy.deepcopy(cfg)
+    names = [c for eq in ("X", "Y", "N") for c in (model.get("equations") or {}).get(eq, [])]
+    sec = get_kind(cfg["kind"]).COEFF_SECTION
+    keys = {k.replace("_", ""): k for k in out[sec]}
+    for i, c in enumerate(names):
+        k = keys.get(c)
+        if k is not None:
+            out[sec][k] = float(out[sec][k]) * (1.0 + rel * (1 if i % 2 == 0 else -1))
     return out
 
 
@@ -74,11 +90,14 @@ def model_for(example: dict, identified: bool, terms: dict) -> dict:
     return {"name": "mmg_linear_hull", "type": "kind", "kind": "mmg", "equations": eqs, "omit": omit}
 
 
-def check_expectations(expect: dict, params: dict, truth_vessel) -> list:
-    """Failures (strings) of a case's expectations on the reported parameters."""
+def check_expectations(expect: dict, params: dict, truth_vessel, model: str = "known") -> list:
+    """Failures (strings) of a case's expectations on the reported parameters (an expectation with ``models``
+    applies to those models only: ``known``, ``identified``)."""
     bad = []
     names = truth_vessel.param_names
     for k, e in (expect or {}).items():
+        if "models" in e and model not in e["models"]:
+            continue
         if k not in params:
             bad.append(f"{k} not reported (have {sorted(params)})")
             continue

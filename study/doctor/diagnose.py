@@ -48,6 +48,8 @@ class Options:
     structure: str | dict | None = None  # None: Savitzky-Golay over 0.2 L/U0 (see DoctorProblem)
     effect_path: tuple = ()  # extra folders of effect YAMLs (the user's own effects)
     checks: str = "error"  # the record checks that need the vessel: error | warn | off
+    anchor: float | None = 0.3  # an identified model's coefficients anchored to the vessel config's, relative sd
+    # (their prior: published, captive tests, CFD); None or 0: plain least squares
 
 
 @dataclass
@@ -81,6 +83,10 @@ def _names(records) -> list:
     return out
 
 
+def _mean_on(ev: Evaluation, records: list) -> float:
+    return float(np.mean(ev.per_record(records))) if records else math.inf
+
+
 def compare(base: np.ndarray, cand: np.ndarray, opt: Options) -> dict:
     """The decision rule for one candidate against its base, from per-record validation errors: improvement of
     the mean, the paired test when there are enough records, significance. Diverged (inf) errors on either side
@@ -106,7 +112,9 @@ def compare(base: np.ndarray, cand: np.ndarray, opt: Options) -> dict:
 
 def decide(base: Evaluation, cands: dict, opt: Options, records=None) -> tuple:
     """(named effect or None, ambiguous pair or [], rows sorted best first) on the given validation records."""
-    records = records or list(base.errors)
+    records = list(records) if records is not None else list(base.errors)
+    if not records:
+        return None, [], []
     b = base.per_record(records)
     rows = []
     for name, ev in cands.items():
@@ -148,7 +156,7 @@ class Doctor:
             self.check_messages = check_records(vessel_cfg, self.train + self.validate,
                                                 strict=self.opt.checks == "error")
         self.problem = DoctorProblem(vessel_cfg, self.model_cfg, self.train, self.opt.structure, self.effects,
-                                     self.train_names)
+                                     self.train_names, self.opt.anchor)
         self.val_df = [r.data if hasattr(r, "data") else r for r in self.validate]
         self.val_infos = [self.problem.info_for(df, getattr(r, "meta", None), n)
                           for r, df, n in zip(self.validate, self.val_df, self.val_names)]
@@ -156,7 +164,7 @@ class Doctor:
         if self.mode == "held_out":
             self.folds = [DoctorProblem(vessel_cfg, self.model_cfg, [r for j, r in enumerate(self.train) if j != i],
                                         self.opt.structure, self.effects,
-                                        [n for j, n in enumerate(self.train_names) if j != i])
+                                        [n for j, n in enumerate(self.train_names) if j != i], self.opt.anchor)
                           for i in range(len(self.train))]
         self.not_applicable = {}
         for e, eff in self.effects.items():
@@ -197,8 +205,9 @@ class Doctor:
         self.evaluations[key] = ev
         return ev
 
-    def rank(self, base: Evaluation) -> tuple:
-        """Every candidate not in ``base`` added on top of it: (rows best first, evaluations by effect)."""
+    def rank(self, base: Evaluation, scored=None) -> tuple:
+        """Every candidate not in ``base`` added on top of it, compared on the ``scored`` records (those whose
+        baseline replay did not diverge): (rows best first, evaluations by effect)."""
         evs = {}
         for c in self.candidates:
             if c in base.effects:
@@ -206,19 +215,24 @@ class Doctor:
             # the candidate's parameters from its grid, the ones already found re-fitted with it (a first effect's
             # estimate absorbs part of a second one, and must be free to give it back)
             evs[c] = self.evaluate(base.effects + (c,), start=base.fit.outer)
-        _, _, rows = decide(base, evs, self.opt)
+        _, _, rows = decide(base, evs, self.opt, scored)
         for r in rows:
             ev = evs[r["effect"]]
             r.update({"parameters": self.problem.describe(ev.fit, [r["effect"]], model=False),
                       "training_error": ev.training_error, "seconds": ev.seconds, "note": "",
-                      "diverged_records": ev.diverged})
-            if r["diverged"]:
+                      "diverged_records": ev.diverged,
+                      "stabilises": [x for x in base.diverged if x not in ev.diverged]})
+            if ev.diverged:
                 r["note"] = f"diverges on {', '.join(ev.diverged)}"
+            if r["stabilises"]:
+                r["note"] = (r["note"] + "; " if r["note"] else "") + \
+                    f"keeps {', '.join(r['stabilises'])} stable (the baseline diverges there)"
         return rows, evs
 
-    def stability(self, base: Evaluation, evs: dict, named, ambiguous) -> dict:
-        """The step's verdict repeated with each validation record left out: in how many it is the same."""
-        recs = list(base.errors)
+    def stability(self, base: Evaluation, evs: dict, named, ambiguous, scored=None) -> dict:
+        """The step's verdict repeated with each (scored) validation record left out: in how many it is the
+        same."""
+        recs = list(scored or base.errors)
         n = len(recs)
         if n < 2:
             return {"k": None, "n": n, "text": f"not assessable with {n} validation record (leave-one-out needs 2)"}
@@ -245,40 +259,50 @@ class Doctor:
                 notes.append(f"training record {name}: only {dist / L:.2g} ship lengths of travel (short)")
         return notes
 
-    def _ladder_row(self, step: str, ev: Evaluation, **extra) -> dict:
+    def _ladder_row(self, step: str, ev: Evaluation, scored: list, **extra) -> dict:
+        """A ladder step: the validation error over every record (inf when one diverged) and over the scored
+        records (those where the baseline did not diverge: what steps are compared on)."""
         return {"step": step, "effects": list(ev.effects), "validation_error": ev.validation_error,
+                "scored_error": _mean_on(ev, scored), "scored_records": list(scored),
                 "training_error": ev.training_error, "diverged": ev.diverged, **extra}
 
     def run(self) -> dict:
         t0 = time.perf_counter()
         base = self.evaluate(tuple(self.given), refine=bool(self.given))
-        ladder = [self._ladder_row("baseline", base)]
+        # the records a comparison can be made on: those whose baseline replay did not diverge (a diverged
+        # replay has no error: it is reported, never scored)
+        scored = [r for r in base.errors if r not in base.diverged]
+        ladder = [self._ladder_row("baseline", base, scored)]
+        ladder_fits = [base.fit]
         notes = list(self.check_messages) + self.excitation_notes()
-        n_val = len(base.errors)
+        n_val = len(scored)
         if n_val < MIN_RECORDS_FOR_TEST:
-            notes.append(f"only {n_val} validation record(s): the consistency test (a paired t-test of the per-record "
-                         f"errors, which needs at least {MIN_RECORDS_FOR_TEST}) was not run, so a verdict rests on "
-                         f"the mean error alone; give at least {MIN_RECORDS_FOR_TEST} validation records (or "
-                         f"{MIN_RECORDS_FOR_TEST} training records, each held out in turn) to settle it")
+            notes.append(f"only {n_val} validation record(s) to compare on: the consistency test (a paired t-test "
+                         f"of the per-record errors, which needs at least {MIN_RECORDS_FOR_TEST}) was not run, so a "
+                         f"verdict rests on the mean error alone; give at least {MIN_RECORDS_FOR_TEST} validation "
+                         f"records (or {MIN_RECORDS_FOR_TEST} training records, each held out in turn) to settle it")
         first_ranking, missing, ambiguous, stab = None, None, [], []
         diverged = {"baseline": base.diverged}
         current = base  # the ladder's step as reported (outer parameters refined on the replay error)
         ranking_base = base if not self.given else self.evaluate(tuple(self.given))  # its equation-error twin
         if base.diverged:
-            notes.insert(0, f"the baseline model DIVERGES when replayed through {len(base.diverged)} of {n_val} "
-                         f"validation record(s) ({', '.join(base.diverged)}): it has no validation error to "
-                         "improve on, so no missing effect is named. Check the model's stability (an identified "
-                         "hull extrapolating beyond its training manoeuvres), validate within the range it was "
-                         "identified on, or add training records that cover the validation manoeuvres")
+            notes.insert(0, f"the baseline model DIVERGES when replayed through {len(base.diverged)} of "
+                         f"{len(base.errors)} validation record(s) ({', '.join(base.diverged)}): "
+                         + (f"those records have no error and are not scored; candidates are compared on the other "
+                            f"{n_val}" if scored else "no record is left to compare on, so no missing effect is "
+                            "named") +
+                         ". Check the model's stability (an identified hull extrapolating beyond its training "
+                         "manoeuvres), validate within the range it was identified on, or add training records "
+                         "that cover the validation manoeuvres")
         for step in range(self.opt.max_steps):
             # candidates are fitted by equation error: compared with the equation-error fit of the same step
-            ranking, evs = self.rank(ranking_base)
-            m, amb, _ = decide(ranking_base, evs, self.opt)
+            ranking, evs = self.rank(ranking_base, scored)
+            m, amb, _ = decide(ranking_base, evs, self.opt, scored)
             if first_ranking is None:
                 first_ranking = ranking
-            if base.diverged:
+            if not scored:
                 break
-            st = self.stability(ranking_base, evs, m, amb)
+            st = self.stability(ranking_base, evs, m, amb, scored)
             st["step"] = step + 1
             if amb:
                 if step == 0:
@@ -298,11 +322,11 @@ class Doctor:
                 break
             key = self.key(ranking_base.effects + (m,))
             cand = self.evaluate(key, start=ranking_base.fit.outer, refine=True)
-            if cand.diverged or not cand.validation_error < current.validation_error:
-                why = (f"diverges on {', '.join(cand.diverged)}" if cand.diverged else
-                       f"its validation error {cand.validation_error:.3g} is not below the previous step's "
-                       f"{current.validation_error:.3g}")
-                ladder.append(self._ladder_row(f"+ {m}", cand, rejected=True, reason=why))
+            e_prev, e_new = _mean_on(current, scored), _mean_on(cand, scored)
+            if not e_new < e_prev:
+                why = (f"diverges on {', '.join(r for r in cand.diverged if r in scored)}" if not np.isfinite(e_new)
+                       else f"its validation error {e_new:.3g} is not below the previous step's {e_prev:.3g}")
+                ladder.append(self._ladder_row(f"+ {m}", cand, scored, rejected=True, reason=why))
                 notes.append(f"ladder step + {m} rejected: with its parameters refined on the training replays it "
                              f"{why}; the ladder stops at the step before")
                 diverged[f"+ {m}"] = cand.diverged
@@ -314,15 +338,17 @@ class Doctor:
                 best["parameters"] = self.problem.describe(cand.fit, [m], model=False)  # the refined estimates
             ranking_base = self.evaluations[(key, False, False)]
             current = cand
-            ladder.append(self._ladder_row(f"+ {m}", cand))
-        if missing is None and not ambiguous and not base.diverged:
+            diverged[f"+ {m}"] = cand.diverged
+            ladder.append(self._ladder_row(f"+ {m}", cand, scored))
+            ladder_fits.append(cand.fit)
+        if missing is None and not ambiguous and scored:
             notes.insert(0, "no candidate effect lowers the out-of-sample error significantly: no significant "
                          "missing effect")
         if notes and any("too little excitation" in n for n in notes) and missing:
             notes.append(f"{missing} ranks first, but with little excitation the ranking is weak evidence")
         self.result = {"base": base, "final": current, "ranking": first_ranking or [], "missing": missing,
                        "ambiguous": ambiguous, "ladder": ladder, "notes": notes, "stability": stab,
-                       "diverged": diverged, "seconds": time.perf_counter() - t0}
+                       "diverged": diverged, "scored": scored, "ladder_fits": ladder_fits, "seconds": time.perf_counter() - t0}
         return self.result
 
     # ------------------------------------------------------------------------------------------ report
@@ -345,27 +371,38 @@ class Doctor:
 
         m = r["missing"]
         stab = {s["step"]: s for s in r["stability"]}
+        scored = r["scored"]
+        prefix = ""
         if base.diverged:
-            verdict = (f"Diverged: the baseline model diverges when replayed through {len(base.diverged)} of "
-                       f"{len(base.errors)} validation record(s) ({', '.join(base.diverged)}); no missing effect "
-                       "can be named")
+            prefix = (f"Diverged: the baseline model diverges when replayed through {len(base.diverged)} of "
+                      f"{len(base.errors)} validation record(s) ({', '.join(base.diverged)}); " +
+                      ("those are not scored. " if scored else "no record is left to compare on, so no missing "
+                       "effect can be named"))
+        if not scored:
+            verdict = prefix
         elif m:
-            e0, e1 = base.validation_error, r["ladder"][1]["validation_error"]
-            pars = list(self.problem.describe(final.fit, [m], model=False).items())
+            e0, e1 = r["ladder"][0]["scored_error"], r["ladder"][1]["scored_error"]
+            pars = list(self.problem.describe(r["ladder_fits"][1], [m], model=False).items())
             fmt = lambda v: f"{v:.4g}" if isinstance(v, (int, float)) else str(v)  # noqa: E731
-            verdict = (f"Missing effect: {m} (validation error {e0:.3g} -> {e1:.3g}, "
-                       f"{100 * (1 - e1 / e0):.0f} % lower; " +
-                       ", ".join(f"{k} = {fmt(v)}" for k, v in pars[:6]) + (", ..." if len(pars) > 6 else "") + ")")
+            on = f" on the other {len(scored)} record(s)" if base.diverged else ""
+            verdict = prefix + (f"Missing effect: {m} (validation error{on} {e0:.3g} -> {e1:.3g}, "
+                                f"{100 * (1 - e1 / e0):.0f} % lower; " +
+                                ", ".join(f"{k} = {fmt(v)}" for k, v in pars[:6]) +
+                                (", ..." if len(pars) > 6 else "") + ")")
+            if base.diverged:
+                still = [x for x in base.diverged if x in r["ladder"][1]["diverged"]]
+                verdict += (f"; with it {', '.join(still)} still diverge(s)" if still else
+                            f"; with it the replay of {', '.join(base.diverged)} is stable")
             if 1 in stab and stab[1]["k"] is not None:
                 verdict += f"; named in {stab[1]['k']} of {stab[1]['n']} with one validation record left out"
             acc = [s for s in r["ladder"][2:] if not s.get("rejected")]
             if acc:
                 verdict += "; then " + ", ".join(s["step"][2:] for s in acc)
         elif r["ambiguous"]:
-            verdict = (f"The data cannot tell {r['ambiguous'][0]} from {r['ambiguous'][1]} apart; both lower the "
+            verdict = prefix + (f"The data cannot tell {r['ambiguous'][0]} from {r['ambiguous'][1]} apart; both lower the "
                        "validation error about equally")
         else:
-            verdict = "No significant missing effect"
+            verdict = prefix + "No significant missing effect"
             if 1 in stab and stab[1]["k"] is not None:
                 verdict += f" (the same in {stab[1]['k']} of {stab[1]['n']} with one validation record left out)"
         params_units = self.problem.units(tuple(self.effects))
@@ -380,6 +417,7 @@ class Doctor:
             "ambiguous": r["ambiguous"],
             "ladder": r["ladder"],
             "stability": r["stability"],
+            "scored_records": r["scored"],
             "diverged": r["diverged"],
             "final": {"effects": list(final.effects), "validation_error": final.validation_error,
                       "parameters": self.problem.describe(final.fit), "errors": final.errors,

@@ -94,7 +94,8 @@ class DoctorProblem:
     effects : dict name -> Effect, or None (every discovered effect)
     """
 
-    def __init__(self, vessel_cfg: dict, model_cfg: dict, records, structure=None, effects=None, names=None):
+    def __init__(self, vessel_cfg: dict, model_cfg: dict, records, structure=None, effects=None, names=None,
+                 anchor: float | None = None):
         self.vessel_cfg = vessel_cfg
         self.base = load_vessel(vessel_cfg)
         if model_cfg.get("type", "kind") != "kind":
@@ -143,6 +144,10 @@ class DoctorProblem:
         # of the yaw rate U0/L, 0.02 rad): a straight run's r has no spread, its error must not blow up
         self.floors = {"u": 0.02 * self.U0, "v": 0.02 * self.U0, "r": 0.02 * self.U0 / self.L, "psi": 0.02}
         self.labels = {}  # parameter -> equation(s), as the rows found them
+        # the model's free coefficients anchored to the vessel config's values, relative standard deviation
+        # (None or 0: plain least squares)
+        self.anchor = float(anchor) if anchor else 0.0
+        self._tau = None
         self._ref = None
         self._node_cache = {}
         self._reg_cache = {}
@@ -350,7 +355,7 @@ class DoctorProblem:
         return self._ref
 
     # ------------------------------------------------------------------------------------- identification
-    def solve(self, effects, values: dict, model: bool = True):
+    def solve(self, effects, values: dict, model: bool = True, _unanchored: bool = False):
         """Linear unknowns for fixed nonlinear parameters: one least-squares problem over the three equations,
         each weighted by its reference scale (the training error is the mean of rss/reference over X, Y, N).
         Returns (coefs, training error, rss per equation)."""
@@ -358,12 +363,18 @@ class DoctorProblem:
         ref = self.reference()
         w = 1.0 / np.sqrt(ref)
         coefs = {}
+        penalty = 0.0
         if names:
             # normal equations summed over the equations (the stacked rows are 3 x longer and least squares on
             # them cost most of an evaluation), columns scaled to unit norm (their units differ by orders of
             # magnitude) and solved by SVD, so a rank-deficient set of unknowns still gets the minimum-norm answer
             G = sum(w[k] ** 2 * (Phi[:, k, :].T @ Phi[:, k, :]) for k in range(3))
             h = sum(w[k] ** 2 * (Phi[:, k, :].T @ y[:, k]) for k in range(3))
+            prior = self._prior(names, len(y)) if (model and self.anchor and not _unanchored) else None
+            if prior is not None:  # MAP: the model's coefficients anchored to the vessel config's (see _prior)
+                theta0, lam = prior
+                G = G + np.diag(lam)
+                h = h + lam * theta0
             s = np.sqrt(np.diag(G))
             ok = s > 0
             c = np.zeros(len(names))
@@ -372,6 +383,8 @@ class DoctorProblem:
                 cs, *_ = linalg.lstsq(Gs, h[ok] / s[ok], cond=1e-13, lapack_driver="gelsd")
                 c[ok] = cs / s[ok]
             r = y - np.einsum("mek,k->me", Phi, c)
+            if prior is not None:
+                penalty = float(np.sum(prior[1] * (c - prior[0]) ** 2)) / 3.0
             coefs = dict(zip(names, (float(x) for x in c)))
             for j, n in enumerate(names):  # the equations each column acts in, as the rows show it
                 norms = np.sqrt(np.sum(Phi[:, :, j] ** 2, axis=0))
@@ -380,8 +393,56 @@ class DoctorProblem:
         else:
             r = y
         rss = {eq: float(np.sum(r[:, k] ** 2)) for k, eq in enumerate(EQUATIONS)}
-        J = float(np.mean([rss[eq] / ref[k] for k, eq in enumerate(EQUATIONS)]))
+        J = float(np.mean([rss[eq] / ref[k] for k, eq in enumerate(EQUATIONS)])) + penalty
         return coefs, J, rss
+
+    def _noise_per_row(self) -> float:
+        """The training error's share of one independent row, from the unanchored baseline fit: its error over
+        the EFFECTIVE number of rows per equation, m (1 - rho) / (1 + rho) with rho the lag-one autocorrelation
+        of its residuals (smoothed rows of a manoeuvre are far from independent: rho is near 1, and counting
+        every row would let any misfit overrule the prior)."""
+        y, Phi, names = self.rows((), {})
+        coefs, J, _ = self.solve((), {}, model=True, _unanchored=True)
+        c = np.array([coefs.get(n, 0.0) for n in names])
+        r = y - (np.einsum("mek,k->me", Phi, c) if len(names) else 0.0)
+        rho = []
+        for k in range(3):
+            a = r[:, k] - r[:, k].mean()
+            den = float(np.dot(a, a))
+            if den > 0:
+                rho.append(float(np.dot(a[1:], a[:-1])) / den)
+        rho = float(np.clip(np.mean(rho), 0.0, 0.999)) if rho else 0.0
+        self._m_base = len(y)
+        m_eff = max(1.0, len(y) * (1.0 - rho) / (1.0 + rho))
+        return J / m_eff
+
+    def _prior(self, names: list, m: int):
+        """(prior values, weights) of the unknowns ``names`` in the normal equations: the model's own free
+        coefficients anchored to the vessel config's values (the coefficients the user has: published, captive
+        tests, CFD) with a standard deviation of ``anchor`` (relative) times their size, at least ``anchor``
+        times the median size of the model's nonzero coefficients (a coefficient published as 0 is not known to
+        be 0). The data term is the training error (1/3) sum_e rss_e/ref_e; for a Gaussian likelihood whose
+        noise is the same fraction of each equation's scale, that fraction is the unanchored baseline's error
+        over the effective number of independent rows (``_noise_per_row``), so the prior enters as that
+        fraction times sum_j ((theta_j - theta0_j)/s_j)^2 (scaled to the rows of the fit at hand).
+        Coefficients an effect frees are anchored the same way when the config has a value for them (an effect
+        says they may differ from it, within the prior); terms the model omits, and the effects' own unknowns,
+        are not. Assumption labelled: independent priors, no correlation between coefficients."""
+        anchored = [j for j, n in enumerate(names) if n in self.model_eq or
+                    (n in self.base.param_names and n not in self.omit and self.base_param(n) != 0.0)]
+        if not anchored:
+            return None
+        if self._tau is None:
+            self._tau = self._noise_per_row()
+        theta0 = np.zeros(len(names))
+        lam = np.zeros(len(names))
+        prior = np.array([self.base_param(names[j]) for j in anchored])
+        nz = np.abs(prior[prior != 0])
+        floor = self.anchor * (float(np.median(nz)) if len(nz) else 1.0)
+        sd = np.maximum(self.anchor * np.abs(prior), floor)
+        theta0[anchored] = prior
+        lam[anchored] = (self._tau * self._m_base / m) / sd ** 2
+        return theta0, lam
 
     def fit(self, effects, start: dict | None = None, grid: bool = True, fixed=(), refine: bool = False,
             max_evals: int = 100) -> Fit:

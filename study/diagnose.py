@@ -135,7 +135,8 @@ def run(conf: dict) -> dict:
     opt = Options(min_improvement=float(conf["min_improvement"]), alpha=float(conf["alpha"]),
                   tie=float(conf["tie"]), max_steps=int(conf["max_steps"]),
                   candidates=tuple(cands) if cands is not None else None, structure=conf.get("structure"),
-                  effect_path=tuple([path] if isinstance(path, str) else path), checks=str(conf.get("checks", "error")))
+                  effect_path=tuple([path] if isinstance(path, str) else path), checks=str(conf.get("checks", "error")),
+                  anchor=float(conf.get("anchor") or 0.0))
     doctor = Doctor(vessel_cfg, conf["model"], train, validate, opt)
     doctor.run()
     rep = write_report(doctor, conf["out"], conf["vessel"]["name"], conf["model"]["name"],
@@ -154,7 +155,14 @@ def main(cfg: DictConfig) -> None:
     rep = run(conf)
     out = Path(conf["out"]).resolve()
     print(rep["verdict"])
-    lad = " -> ".join(f"{s['step']} {s['validation_error']:.3g}" for s in rep["ladder"])
+    def step(s):
+        e = s.get("scored_error", s["validation_error"])
+        txt = f"{s['step']} " + (f"{e:.3g}" if e == e and e != float("inf") else "diverged")
+        if s.get("diverged"):
+            txt += f" (diverges on {', '.join(s['diverged'])})"
+        return txt + (" [rejected]" if s.get("rejected") else "")
+
+    lad = " -> ".join(step(s) for s in rep["ladder"])
     print(f"validation error: {lad}")
     for n in rep.get("notes") or []:
         print(f"note: {n}")

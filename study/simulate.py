@@ -37,6 +37,9 @@ def make_record(conf: dict):
         df["delta"] = np.interp(df["time"], clean["time"], clean["delta_cmd"])
     if log != "both":
         df = df.drop(columns=["delta_cmd"])
+    h_T = (conf.get("depth") or {}).get("h_T")
+    if h_T is not None and np.isfinite(float(h_T)):  # the measured water depth, as an echo sounder logs it
+        df["depth"] = float(h_T) * float(truth.cfg["particulars"]["d"])
     meta = {
         "name": f"{truth.name}_{man.name}",
         "source": "simulated by study.simulate",

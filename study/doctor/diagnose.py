@@ -113,8 +113,8 @@ def compare(base: np.ndarray, cand: np.ndarray, opt: Options) -> dict:
 def decide(base: Evaluation, cands: dict, opt: Options, records=None) -> tuple:
     """(named effect or None, ambiguous pair or [], rows sorted best first) on the given validation records."""
     records = list(records) if records is not None else list(base.errors)
-    if not records:
-        return None, [], []
+    if not records:  # nothing to score: the rows still show each candidate (every comparison void)
+        records = list(base.errors)
     b = base.per_record(records)
     rows = []
     for name, ev in cands.items():
@@ -401,6 +401,10 @@ class Doctor:
         elif r["ambiguous"]:
             verdict = prefix + (f"The data cannot tell {r['ambiguous'][0]} from {r['ambiguous'][1]} apart; both lower the "
                        "validation error about equally")
+        elif len(r["ladder"]) > 1 and r["ladder"][1].get("rejected"):
+            st = r["ladder"][1]
+            verdict = prefix + (f"No missing effect named: the best candidate, {st['step'][2:]}, was rejected "
+                                f"({st['reason']})")
         else:
             verdict = prefix + "No significant missing effect"
             if 1 in stab and stab[1]["k"] is not None:

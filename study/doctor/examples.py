@@ -1,4 +1,4 @@
-"""``python -m study.doctor.examples``: the doctor's three worked examples, rebuilt into ``paper_figs/doctor/``.
+"""``python -m study.doctor.examples``: the doctor's four worked examples, rebuilt into ``paper_figs/doctor/``.
 
 1. ``simulated_current``: the README's example -- five records of the 7 m KVLCC2 made by ``python -m
    study.simulate`` with a hidden current (10 % of the speed towards the north-east), 1 % noise; the model is the
@@ -8,6 +8,8 @@
    with KVLCC2's MMG coefficients as a labelled stand-in: no coefficients of the Esso Osaka are published).
 3. ``kvlcc2_hsva``: HSVA's free-running KVLCC2 zigzags, the 5 deg and 1 deg switch-heading ones for training,
    the 10/10 and 20/10 ones (both sides) for validation; the model is ``kvlcc2_l7``, the published MMG set.
+4. ``kvlcc2_hsva_identified``: the same records, the MMG hull identified from them (anchored to the published
+   set): the user's normal case.
 
 Each writes ``paper_figs/doctor/<example>/`` (report.html, report.json, figures/) and the summary
 ``paper_figs/doctor/README.md``. The real data are read in place (``../shared/data/real``); an example whose
@@ -71,13 +73,33 @@ def kvlcc2_hsva() -> dict:
                      validate=f"{d}/HSVA_CPMC_KVLCC2_Z_*_10_?.dat", out=str(OUT / "kvlcc2_hsva")))
 
 
+def kvlcc2_hsva_identified() -> dict:
+    """The HSVA zigzags again, with the MMG hull identified from them (anchored to the published set): the
+    user's normal case."""
+    from ..diagnose import run
+    from ..loaders import real_data_dir
+
+    d = real_data_dir() / "kvlcc2_hsva" / "raw_data"
+    return run(_conf(vessel="kvlcc2_l7", model="mmg_hull", train=f"{d}/HSVA_CPMC_KVLCC2_Z_*_0?.dat",
+                     validate=f"{d}/HSVA_CPMC_KVLCC2_Z_*_10_?.dat", out=str(OUT / "kvlcc2_hsva_identified")))
+
+
 def _summary(name: str, rep: dict) -> list:
     lines = [f"### {name}", "", f"**{rep['verdict']}**", "", "| step | validation error |", "|---|---|"]
-    lines += [f"| {s['step']} | {s['validation_error']:.3g} |" for s in rep["ladder"]]
+    def num(x, pct=False):
+        if x is None or x != x:
+            return "-"
+        if x == float("inf"):
+            return "diverged"
+        return f"{100 * x:.0f} %" if pct else f"{x:.3g}"
+
+    lines += [f"| {s['step']}{' (rejected: ' + s['reason'] + ')' if s.get('rejected') else ''} | "
+              f"{num(s.get('scored_error', s['validation_error']))} |" for s in rep["ladder"]]
     lines += ["", "| candidate | validation error | improvement | significant | parameters |", "|---|---|---|---|---|"]
     for c in rep["ranking"]:
-        pars = ", ".join(f"{k} {v:.3g}" for k, v in list(c["parameters"].items())[:4])
-        lines.append(f"| {c['effect']} | {c['validation_error']:.3g} | {100 * c['improvement']:.0f} % | "
+        pars = ", ".join(f"{k} {num(v) if isinstance(v, (int, float)) else v}"
+                         for k, v in list(c["parameters"].items())[:4])
+        lines.append(f"| {c['effect']} | {num(c['validation_error'])} | {num(c['improvement'], True)} | "
                      f"{'yes' if c['significant'] else 'no'} | {pars} |")
     if rep.get("notes"):
         lines += [""] + [f"- {n}" for n in rep["notes"]]
@@ -95,7 +117,7 @@ def main() -> int:
              "`../shared/data/real`, never copied here.", ""]
     with tempfile.TemporaryDirectory() as tmp:
         for name, fn in (("simulated_current", lambda: simulated_current(Path(tmp))), ("esso_osaka", esso_osaka),
-                         ("kvlcc2_hsva", kvlcc2_hsva)):
+                         ("kvlcc2_hsva", kvlcc2_hsva), ("kvlcc2_hsva_identified", kvlcc2_hsva_identified)):
             try:
                 rep = fn()
             except FileNotFoundError as e:

@@ -141,6 +141,13 @@ def test_too_little_excitation_is_said():
     assert rep["missing_effect"] == "current"
 
 
+def scaled(ev, effects, f):
+    """A stand-in evaluation of ``effects``: the baseline's errors times ``f`` (to test the decision rules)."""
+    errs = {r: {c: ({"rmse": e["rmse"] * f, "nrmse": e["nrmse"] * f} if isinstance(e, dict) else e)
+                for c, e in es.items()} for r, es in ev.errors.items()}
+    return Evaluation(tuple(effects), ev.fit, errs, ev.validation_error * f, ev.training_error, 0.0)
+
+
 def test_two_candidates_within_the_tie_are_reported_as_indistinguishable(monkeypatch):
     """The decision rule: when the two best significant candidates are within 10 % of each other, the report
     names both and no missing effect (it does not guess)."""
@@ -151,12 +158,7 @@ def test_two_candidates_within_the_tie_are_reported_as_indistinguishable(monkeyp
 
     def fake_evaluate(self, effects, start=None, fixed=(), refine=False):
         ev = real(self, (), start, fixed, refine)  # the baseline's errors, scaled per candidate
-        if not effects:
-            return ev
-        f = scale[effects[-1]]
-        errs = {r: {c: ({"rmse": e["rmse"] * f, "nrmse": e["nrmse"] * f} if isinstance(e, dict) else e)
-                    for c, e in es.items()} for r, es in ev.errors.items()}
-        return Evaluation(tuple(effects), ev.fit, errs, ev.validation_error * f, ev.training_error, 0.0)
+        return scaled(ev, effects, scale[effects[-1]]) if effects else ev
 
     monkeypatch.setattr(Doctor, "evaluate", fake_evaluate)
     d.run()
@@ -204,6 +206,11 @@ def test_cli_on_simulated_files_names_the_hidden_current(tmp_path):
     assert {"effect", "validation_error", "improvement", "significant", "parameters"} <= set(rep["ranking"][0])
     assert (out / "report.html").stat().st_size > 10_000
     assert len(list((out / "figures").glob("*.png"))) >= 5
+    mm = pd.DataFrame(rep["maneuver_metrics"])  # the comparison in the ship's own terms
+    assert {"record", "metric", "unit", "measured", "baseline", "final"} <= set(mm.columns)
+    td = mm[mm["metric"] == "tactical_diameter"].iloc[0]  # the one turning circle (val_b)
+    # the model with the current found predicts the turn's tactical diameter better than the baseline
+    assert abs(td["final"] - td["measured"]) < abs(td["baseline"] - td["measured"]) and td["unit"] == "m"
     runs = pd.read_parquet(tmp_path / "results" / "runs.parquet")
     assert len(runs) == 2 and (runs["cfg_study"] == "doctor").all()
     before = (out / "report.json").read_bytes()
@@ -262,12 +269,7 @@ def test_a_ladder_step_that_raises_the_error_is_rejected(monkeypatch):
 
     def fake_evaluate(self, effects, start=None, fixed=(), refine=False):
         ev = real(self, (), start, fixed, False)
-        if not effects:
-            return ev
-        f = factor[(effects[-1], refine)]
-        errs = {r: {c: ({"rmse": e["rmse"] * f, "nrmse": e["nrmse"] * f} if isinstance(e, dict) else e)
-                    for c, e in es.items()} for r, es in ev.errors.items()}
-        return Evaluation(tuple(effects), ev.fit, errs, ev.validation_error * f, ev.training_error, 0.0)
+        return scaled(ev, effects, factor[(effects[-1], refine)]) if effects else ev
 
     monkeypatch.setattr(Doctor, "evaluate", fake_evaluate)
     d.run()

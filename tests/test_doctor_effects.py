@@ -115,3 +115,26 @@ def test_a_users_own_effect_from_outside_the_package(monkeypatch):
     assert rep["ranking"][0]["parameters"]["yaw_n2"] == pytest.approx(c, rel=0.3)
     assert rep["units"]["yaw_n2"] == "N m s^2"
     sys.modules.pop("n2_yaw", None)
+
+
+@pytest.mark.parametrize("vessel,model", [("mariner", "abkowitz"), ("usv_waterjet", "usv_full"), ("auv", "auv")])
+def test_every_force_model_kind_is_diagnosed(vessel, model):
+    """The doctor with the other force models, identified and anchored to the vessel config: a hidden current
+    (12 % of the speed towards 200 deg) on the Abkowitz Mariner and the waterjet USV is found; the AUV's hull
+    identified from zigzags diverges in the 35 deg turn, and the report says so rather than naming anything."""
+    from study.sim import read_config
+
+    v = read_config("vessel", vessel)
+    example = {"environment": [{"name": "current", "speed_U0": 0.12, "direction_deg": 200.0}]}
+    train, val, _ = make_records(example, vessel_cfg=v)
+    d = Doctor(v, read_config("model", model), train, val)
+    d.run()
+    rep = d.report()
+    assert {"rudder_interaction", "propeller_wake"} <= set(rep["not_applicable"])  # MMG-only candidates
+    if rep["baseline"]["diverged"]:
+        assert rep["verdict"].startswith("Diverged:") and vessel == "auv", rep["verdict"]
+        return
+    assert rep["missing_effect"] == "current", rep["verdict"]
+    assert rep["ladder"][1]["scored_error"] <= 0.5 * rep["ladder"][0]["scored_error"]
+    p = rep["ranking"][0]["parameters"]
+    assert p["current_speed"] == pytest.approx(0.12 * float(v["operation"]["U0"]), rel=0.2)

@@ -17,7 +17,8 @@
    out and reported as "named in k of n".
 5. **Ladder**: the missing effect is added (its parameters refined on the training replays), the remaining
    candidates ranked again on top of it, and so on while a significant one remains. A step whose validation
-   error is not lower than the step before is rejected: the ladder stops and says why.
+   error, refined, is not at least ``min_improvement`` lower than the step before is rejected: the ladder stops
+   and says why.
 6. **Divergence**: a replay that leaves the physical envelope (``fit.ENVELOPE``) or overflows is *diverged*:
    it has no error to compare. A diverged baseline gets a headline of its own and no missing effect; a
    diverged candidate is never significant.
@@ -323,9 +324,13 @@ class Doctor:
             key = self.key(ranking_base.effects + (m,))
             cand = self.evaluate(key, start=ranking_base.fit.outer, refine=True)
             e_prev, e_new = _mean_on(current, scored), _mean_on(cand, scored)
-            if not e_new < e_prev:
+            # the step as refined must pass the ranking's own bar: lower, by at least min_improvement
+            if not e_new <= e_prev * (1.0 - self.opt.min_improvement):
                 why = (f"diverges on {', '.join(r for r in cand.diverged if r in scored)}" if not np.isfinite(e_new)
-                       else f"its validation error {e_new:.3g} is not below the previous step's {e_prev:.3g}")
+                       else f"its validation error {e_new:.3g} is not below the previous step's {e_prev:.3g}"
+                       if e_new >= e_prev else
+                       f"its validation error falls only {100 * (1 - e_new / e_prev):.0f} % ({e_prev:.3g} -> "
+                       f"{e_new:.3g}), less than the {100 * self.opt.min_improvement:.0f} % a candidate needs")
                 ladder.append(self._ladder_row(f"+ {m}", cand, scored, rejected=True, reason=why))
                 notes.append(f"ladder step + {m} rejected: with its parameters refined on the training replays it "
                              f"{why}; the ladder stops at the step before")
@@ -348,7 +353,8 @@ class Doctor:
             notes.append(f"{missing} ranks first, but with little excitation the ranking is weak evidence")
         self.result = {"base": base, "final": current, "ranking": first_ranking or [], "missing": missing,
                        "ambiguous": ambiguous, "ladder": ladder, "notes": notes, "stability": stab,
-                       "diverged": diverged, "scored": scored, "ladder_fits": ladder_fits, "seconds": time.perf_counter() - t0}
+                       "diverged": diverged, "scored": scored, "ladder_fits": ladder_fits,
+                       "seconds": time.perf_counter() - t0}
         return self.result
 
     # ------------------------------------------------------------------------------------------ report
@@ -399,8 +405,8 @@ class Doctor:
             if acc:
                 verdict += "; then " + ", ".join(s["step"][2:] for s in acc)
         elif r["ambiguous"]:
-            verdict = prefix + (f"The data cannot tell {r['ambiguous'][0]} from {r['ambiguous'][1]} apart; both lower the "
-                       "validation error about equally")
+            verdict = prefix + (f"The data cannot tell {r['ambiguous'][0]} from {r['ambiguous'][1]} apart; both "
+                                "lower the validation error about equally")
         elif len(r["ladder"]) > 1 and r["ladder"][1].get("rejected"):
             st = r["ladder"][1]
             verdict = prefix + (f"No missing effect named: the best candidate, {st['step'][2:]}, was rejected "

@@ -680,7 +680,8 @@ def identify_in_study(base, model_cfg: dict, records, structure_cfg, truth) -> d
                  "yaw_bias_Y": env["ext_Y"] / q[1], "yaw_bias_N": env["ext_N"] / q[2]}
     names = base.param_names
     params = []
-    for k, v in {**pb.describe(fit), **{c: fit.coefs[c] for c in pb.free_coefficients(effects) if c in fit.coefs}}.items():
+    freed = {c: fit.coefs[c] for c in pb.free_coefficients(effects) if c in fit.coefs}
+    for k, v in {**pb.describe(fit), **freed}.items():
         if not isinstance(v, (int, float)):
             continue
         eq = pb.equation_of(k) if k in names else "effect"

@@ -64,7 +64,8 @@ class Wind(Effect):
         we = float(np.mean(df["wind_speed"] * np.sin(df["wind_dir"])))
         env = dict(zip(problem.base.param_names, problem.base.params))
         return {"wind_speed": math.hypot(wn, we), "wind_dir": math.atan2(we, wn),
-                "wind_cx": env["wind_cx"] * values["wind_factor_X"], "wind_cy": env["wind_cy"] * values["wind_factor_Y"],
+                "wind_cx": env["wind_cx"] * values["wind_factor_X"],
+                "wind_cy": env["wind_cy"] * values["wind_factor_Y"],
                 "wind_cn": env["wind_cn"] * values["wind_factor_N"]}
 
     def describe(self, values):

@@ -93,6 +93,7 @@ def _param_checks(case, p):
             assert p[k] == pytest.approx(float(hull[k[0] + "_" + k[1:]]), rel=0.25)
 
 
+@pytest.mark.slow  # the generated tests (test_doctor_effects.py) cover every effect at other sizes by default
 @pytest.mark.parametrize("case", list(CASES))
 def test_hidden_effect_ranks_first_halves_the_error_and_is_identified(case):
     d, rep = diagnose(case)

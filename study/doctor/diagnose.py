@@ -33,7 +33,7 @@ import numpy as np
 from scipy import stats
 
 from .effects import list_effects, registry
-from .fit import CHANNELS, DoctorProblem, diverged_records, record_error, record_errors, validation_error
+from .fit import CHANNELS, UNITS, DoctorProblem, diverged_records, record_error, record_errors, validation_error
 
 #: the consistency test needs this many validation records (a paired t-test on fewer has no power)
 MIN_RECORDS_FOR_TEST = 3
@@ -361,14 +361,13 @@ class Doctor:
     def report(self) -> dict:
         r = self.result
         base, final = r["base"], r["final"]
-        units = {"u": "m/s", "v": "m/s", "r": "rad/s", "psi": "rad", "track": "m"}
 
         def errs_rows():
             rows = []
             for rec in base.errors:
                 for c in CHANNELS + ("track",):
                     b, f = base.errors[rec][c], final.errors[rec][c]
-                    rows.append({"record": rec, "channel": c, "unit": units[c],
+                    rows.append({"record": rec, "channel": c, "unit": UNITS[c],
                                  "baseline_rmse": b["rmse"], "final_rmse": f["rmse"],
                                  "baseline_nrmse": b["nrmse"], "final_nrmse": f["nrmse"],
                                  "baseline_diverged": bool(base.errors[rec].get("diverged")),
@@ -547,9 +546,12 @@ def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: 
     windows = worst_windows(curves)
     add("growth.png", plots.growth(curves, windows), "How the error grows along each record",
         "Mean normalised error of u, v, r and psi at each instant; the worst windows are shaded.", "growth")
+    rej = any(s.get("rejected") for s in rep["ladder"])
+    div = any(s.get("diverged") for s in rep["ladder"])
     add("ladder.png", plots.ladder(rep["ladder"]), "The error ladder", "Validation error (mean NRMSE of u, v, r, "
-        "psi over the validation records) of the baseline and of each step with an effect added; a rejected step "
-        "(its error not lower) is hatched, a diverged one marked.", "ladder")
+        "psi over the validation records) of the baseline and of each step with an effect added" +
+        ("; a rejected step (its error not lower by 10 %) is hatched" if rej else "") +
+        ("; a diverged replay is marked, with no bar" if div else "") + ".", "ladder")
     from .maneuver_metrics import maneuver_metrics
 
     mm = []

@@ -450,20 +450,30 @@ class DoctorProblem:
         error) kept.
 
         The nonlinear parameters not in ``fixed`` (those keep their ``start`` values) start from ``start``
-        where known and from the grid of their effect otherwise; the best start point is polished by Powell's
-        method inside the bounds (equation error, variable projection). With ``refine`` they are then polished
+        where known and from the grid of their effect otherwise; the best start point is polished by a
+        Nelder-Mead search inside the bounds (equation error, variable projection). With ``refine`` they are then polished
         on the training records' replay error (output error, the linear unknowns still by equation error at
         each point): less biased by measurement noise than the equation error.
         """
         effects = tuple(effects)
+        variants = self.variants(effects)
+        if len(variants) == 1:
+            return self._fit_variant(effects, variants[0], start, grid, fixed, refine, max_evals)
+        # several variants (shallow water's formulas): each screened with a short search, then the best (and any
+        # within 2 % of it) searched in full from there -- a full search of each cost four times as much
+        screened = [self._fit_variant(effects, v, start, grid, fixed, False, SCREEN_EVALS) for v in variants]
+        order = sorted(range(len(variants)), key=lambda i: screened[i].training_error)
+        first = screened[order[0]].training_error
+        keep = [i for i in order if screened[i].training_error <= first * 1.02 + 1e-12][:2]
+        count = sum(f.evaluations for f in screened)
         best = None
-        for variant in self.variants(effects):
-            f = self._fit_variant(effects, variant, start, grid, fixed, refine, max_evals)
+        for i in keep:
+            f = self._fit_variant(effects, variants[i], {**(start or {}), **screened[i].outer}, False, fixed,
+                                  refine, max_evals)
+            count += f.evaluations
             if best is None or f.training_error < best.training_error:
-                f.evaluations += best.evaluations if best else 0
                 best = f
-            else:
-                best.evaluations += f.evaluations
+        best.evaluations = count
         return best
 
     def _fit_variant(self, effects, variant, start, grid, fixed, refine, max_evals) -> Fit:
@@ -582,6 +592,10 @@ class DoctorProblem:
             return None
         return pd.DataFrame({"time": tu, "u": out[:, 0], "v": out[:, 1], "r": out[:, 2], "x0": out[:, 3],
                              "y0": out[:, 4], "psi": out[:, 5], "delta": out[:, 6]})
+
+
+#: the local search's evaluations when an effect's variants are screened (see ``DoctorProblem.fit``)
+SCREEN_EVALS = 25
 
 
 def _half_step(grid, lo: float, hi: float) -> float:

@@ -17,6 +17,7 @@ import pandas as pd
 
 from .collinearity import collinearity
 from .estimators import make_estimator
+from .priors import prior_for
 from .structures import segments
 
 #: interval reported from posterior draws (emcee): the central 90 %
@@ -85,8 +86,12 @@ def _csv_bytes(df: pd.DataFrame) -> bytes:
     return df.to_csv(index=False, float_format="%.10g").encode("utf-8")
 
 
-def _fit_kwargs(fn, progress: bool) -> dict:
-    return {"progress": progress} if "progress" in inspect.signature(fn).parameters else {}
+def _fit_kwargs(fn, progress: bool, prior: dict | None = None) -> dict:
+    params = inspect.signature(fn).parameters
+    out = {"progress": progress} if "progress" in params else {}
+    if prior is not None and "prior" in params:
+        out["prior"] = prior
+    return out
 
 
 @dataclass
@@ -155,6 +160,12 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
                 samples[n] = est.samples_[:, j]
     else:
         cand = (estimator_cfg.get("extra_candidates") or {}).get("degree")
+        # prior knowledge of the coefficients (estimator.params.prior: map, emcee), per regression column
+        prior_cfg = (estimator_cfg.get("params") or {}).get("prior")
+        prior = prior_for(model, prior_cfg)
+        if prior is not None:
+            metrics["prior_source"] = str(prior_cfg["source"])
+            metrics["prior_is_truth"] = float(prior_cfg["source"] == "vessel" and bool(model.truth()[2]))
         t0 = time.perf_counter()
         prepared = prepare(model, structure, records, candidates=cand, seed=seed)
         timings["regressors"] = time.perf_counter() - t0
@@ -175,7 +186,10 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
             post = {"y": pr.y, "Phi_test": pr.X_test, "y_test": pr.y_test}
             est = make_estimator(estimator_cfg)
             t0 = time.perf_counter()
-            est.fit(X, post["y"], **_fit_kwargs(est.fit, progress))
+            eq_prior = {n: prior[n] for n in names if n in prior} if prior is not None else None
+            if eq_prior is not None and len(eq_prior) < len(names):
+                raise ValueError(f"equation {eq}: the prior has no value for {[n for n in names if n not in eq_prior]}")
+            est.fit(X, post["y"], **_fit_kwargs(est.fit, progress, eq_prior))
             fit_time += time.perf_counter() - t0
             coef = np.asarray(est.coef_, float).ravel()
             resid = post["y"] - X.to_numpy() @ coef - getattr(est, "intercept_", 0.0)
@@ -253,6 +267,11 @@ def _num(x):
 
 def _intervals(est, j: int) -> dict:
     out = {}
+    for attr, key in (("prior_mean_", "prior_mean"), ("prior_sd_", "prior_sd"),
+                      ("identifiability_", "identifiability")):
+        a = getattr(est, attr, None)
+        if a is not None:
+            out[key] = float(a[j])
     ci = getattr(est, "coef_interval_", None)
     if ci is not None:
         out["ci_low"], out["ci_high"] = float(ci[j][0]), float(ci[j][1])

@@ -289,6 +289,19 @@ class NomotoModel(Model):
                     out["alpha"] = g["r3"] / a2
         return {k: (float(v) if np.ndim(v) == 0 else v) for k, v in out.items()}
 
+    def regression_from_physical(self, phys: dict) -> dict:
+        """The regression coefficients of K, T, alpha (T1, T2, T3): the inverse of :meth:`physical` (a prior
+        given on the physical parameters becomes a prior on the regression's columns)."""
+        K, a = float(phys["K"]), float(phys.get("alpha", 0.0))
+        if self.order == 1:
+            T = float(phys["T"])
+            out = {"r": -1.0 / T, "delta": K / T, "r3": -a / T}
+        else:
+            T1, T2, T3 = float(phys["T1"]), float(phys["T2"]), float(phys["T3"])
+            P = T1 * T2
+            out = {"r_dot": -(T1 + T2) / P, "r": -1.0 / P, "r3": -a / P, "delta": K / P, "delta_dot": K * T3 / P}
+        return {n: out[n] for n in self.equations["N"]}
+
     def truth(self):
         if self._truth is None:
             from ..sim.linearize import nomoto_truth

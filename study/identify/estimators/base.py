@@ -16,6 +16,9 @@ Learned attributes (trailing underscore):
     a standard deviation and an interval (credible or confidence, at ``interval_level_``, e.g. 0.9).
 ``samples_`` (m, k) — optional
     draws from a posterior (emcee); the model turns them into intervals of derived parameters.
+``prior_mean_``, ``prior_sd_``, ``identifiability_`` (k,) — optional
+    an estimator under a prior (``fit(X, y, prior={column: (mean, sd)})``): the prior and the ratio of posterior
+    to prior standard deviation (near 0: the records determine the coefficient; near 1: the prior does).
 ``selected_`` (k,) bool — optional
     terms kept by a selecting estimator (lasso, sindy).
 ``diagnostics_`` dict
@@ -82,6 +85,7 @@ class Estimator(RegressorMixin, BaseEstimator):
         self.intercept_ = 0.0
         self.diagnostics_ = {}
         self.artefacts_ = {}
-        for a in ("coef_std_", "coef_interval_", "interval_level_", "samples_", "selected_"):
+        for a in ("coef_std_", "coef_interval_", "interval_level_", "samples_", "selected_", "prior_mean_",
+                  "prior_sd_", "identifiability_"):
             if hasattr(self, a):
                 delattr(self, a)

@@ -1,4 +1,5 @@
-"""The Hydra app: ``python -m study`` runs one run, ``python -m study -m a=1,2 b=x,y`` sweeps.
+"""The Hydra app: ``python -m study`` runs one run, ``python -m study -m a=1,2 b=x,y`` sweeps;
+``python -m study train=<files> [validate=<files>] ...`` runs on the user's own records (``study.records_run``).
 
 Each job resolves its configuration, hands it to the results store (which skips a run already finished,
 records a failure without stopping the sweep, and writes the record atomically), and the table
@@ -9,6 +10,7 @@ from __future__ import annotations
 import json
 import logging
 import re
+import sys
 from pathlib import Path
 
 import hydra
@@ -104,12 +106,18 @@ class SweepProgress(Callback):
 
 @hydra.main(config_path=CONF_DIR, config_name="config", version_base="1.3")
 def main(cfg: DictConfig) -> dict:
-    from .pipeline import run_study
+    from .pipeline import run_study, study_config
+    from .records_run import RecordsInputError
     from .results import ResultStore, run_guarded
 
     conf = OmegaConf.to_container(cfg, resolve=True)
+    try:  # a run on the user's files (train=...): read, checksum and check them before anything is written
+        run_conf, data = study_config(conf)
+    except RecordsInputError as e:
+        print(f"study: error: {e}", file=sys.stderr, flush=True)
+        sys.exit(2)
     store = ResultStore(_results_dir(cfg))
-    record = run_guarded(store, conf, lambda: run_study(conf), seed=int(conf.get("seed", 0)))
+    record = run_guarded(store, run_conf, lambda: run_study(conf, data=data), seed=int(conf.get("seed", 0)))
     status = record.get("status")
     msg = f"run {record['run_id']}: {status}" + (" (already finished, resumed)" if record.get("resumed") else "")
     if status == "failed":

@@ -1,4 +1,5 @@
-"""One run of the study, independent of Hydra: simulate -> measure -> identify -> validate.
+"""One run of the study, independent of Hydra: simulate -> measure -> identify -> validate (or, with
+``train=<files>``, read -> identify -> replay through the validation records: ``study.records_run``).
 
 ``run_study(conf)`` takes the resolved configuration as a plain dict (what the Hydra app passes, and what
 tests build with ``compose``) and returns the run's result: metrics, per-parameter estimates against truth,
@@ -29,19 +30,26 @@ def resolve_effects(effects: list, U0: float) -> list[dict]:
     return out
 
 
+def _shallow(conf: dict) -> ShallowWater:
+    depth = conf.get("depth") or {}
+    return ShallowWater(h_T=depth.get("h_T"), formula=depth.get("formula", "kijima_1990"))
+
+
+def known_vessel(conf: dict):
+    """The vessel as the engineer knows it: the vessel config at the configured depth (no current or wind)."""
+    return load_vessel(conf["vessel"], [_shallow(conf)])
+
+
 def vessels_for(conf: dict):
     """(truth vessel with depth + environment, model vessel with depth only).
 
     The model vessel is what the engineer knows: the depth (measured) but not the current or wind, and not the
     coefficients being identified.
     """
-    depth = conf.get("depth") or {}
-    shallow = ShallowWater(h_T=depth.get("h_T"), formula=depth.get("formula", "kijima_1990"))
     U0 = float(conf["vessel"]["operation"]["U0"])
     env_effects = resolve_effects((conf.get("environment") or {}).get("effects", []), U0)
-    truth = load_vessel(conf["vessel"], [shallow, *env_effects])
-    base = load_vessel(conf["vessel"], [shallow])
-    return truth, base
+    truth = load_vessel(conf["vessel"], [_shallow(conf), *env_effects])
+    return truth, known_vessel(conf)
 
 
 def _level(x):
@@ -87,13 +95,14 @@ def _skip_reason(model, structure, estimator) -> str | None:
     return None
 
 
-def _trace_bytes(meas, pred, channels, max_rows: int = 600) -> bytes:
-    """Truth and prediction of one validation manoeuvre, thinned to at most ``max_rows`` rows, as CSV."""
+def _trace_bytes(meas, pred, channels, max_rows: int = 600, label: str = "truth") -> bytes:
+    """Truth (or, with ``label='measured'``, a measured record) and prediction of one validation manoeuvre,
+    thinned to at most ``max_rows`` rows, as CSV."""
     step = max(1, int(np.ceil(len(meas) / max_rows)))
     m = meas.iloc[::step].reset_index(drop=True)
     out = {"time": m["time"]}
     for c in ("u", "v", "r", "x0", "y0", "psi", "delta"):
-        out[f"truth_{c}"] = m[c]
+        out[f"{label}_{c}"] = m[c]
         if c in pred:
             out[f"model_{c}"] = np.interp(m["time"], pred["time"], pred[c])
     return pd.DataFrame(out).to_csv(index=False, float_format="%.7g").encode("utf-8")
@@ -140,9 +149,38 @@ def _predictive_band(model, draws: dict, maneuver: str, meas, conf, seed, max_ro
     return pd.DataFrame(cols).to_csv(index=False, float_format="%.7g").encode("utf-8")
 
 
-def run_study(conf: dict) -> dict:
+def study_config(conf: dict) -> tuple[dict, object]:
+    """``(run configuration, records)`` of a composed configuration: what the results store records (and hashes
+    into the run id), and the records read from files (None for a simulated run).
+
+    Without ``train`` the run configuration is ``conf`` without the file keys (``train``, ``validate``,
+    ``states``, ``checks``: ``study.records_run.FILE_KEYS``), so a simulated run keeps the run id it had before
+    they existed. With ``train`` the files are read, checksummed and checked (``study.records_run.load``; a
+    problem raises ``RecordsInputError``, one line) and the configuration holds the records' names and sha256
+    instead of the simulation's axes (``study.records_run.run_config``).
+    """
+    from .records_run import FILE_KEYS, RecordsInputError, check_study_name, load, run_config
+
+    if conf.get("train") is None:
+        if conf.get("validate") is not None:
+            raise RecordsInputError(f"validate={conf['validate']}: validation records need training records "
+                                    "(train=<files>); a simulated run validates on maneuvers.validate")
+        return {k: v for k, v in conf.items() if k not in FILE_KEYS}, None
+    check_study_name(conf)
+    data = load(conf)
+    return run_config(conf, data), data
+
+
+def run_study(conf: dict, data=None) -> dict:
     """Run one configuration; returns ``{'metrics', 'params', 'timings', 'artefacts'}`` or a skipped result
-    ``{'status': 'skipped', 'error': reason}`` for a combination that makes no sense (see study.results)."""
+    ``{'status': 'skipped', 'error': reason}`` for a combination that makes no sense (see study.results).
+
+    With ``conf['train']`` set the run is on the user's records (``study.records_run``): ``data`` are the records
+    ``study_config`` read (read here when None)."""
+    if conf.get("train") is not None:
+        from .records_run import load, run_on_records
+
+        return run_on_records(conf, data if data is not None else load(conf))
     from .identify.estimators import make_estimator
     from .identify.fit import Identification, identify
     from .identify.models import make_model

@@ -432,6 +432,7 @@ class Doctor:
                       "parameters": self.problem.describe(final.fit), "errors": final.errors,
                       "diverged": final.diverged},
             "units": params_units,
+            "identifiability": self.problem.identifiability(base.fit),
             "errors_table": errs_rows(),
             "notes": r["notes"],
             "mode": self.mode,

@@ -444,6 +444,48 @@ class DoctorProblem:
         lam[anchored] = (self._tau * self._m_base / m) / sd ** 2
         return theta0, lam
 
+    def identifiability(self, fit: Fit) -> list[dict]:
+        """Per anchored model coefficient of a fit: prior, estimate, posterior and prior standard deviation and
+        their ratio (near 0: the records determine it; near 1: the prior does), with a plain sentence. The
+        posterior covariance is that of the anchored normal equations (``solve``): data weight as there, the
+        effects' nonlinear parameters held at their estimates. Empty when the model is not anchored."""
+        if not self.anchor or not self.model_free:
+            return []
+        y, Phi, names = self.rows(fit.effects, fit.outer, model=True)
+        prior = self._prior(names, len(y))
+        if prior is None:
+            return []
+        w2 = 1.0 / self.reference()
+        G = sum(w2[k] * (Phi[:, k, :].T @ Phi[:, k, :]) for k in range(3))
+        theta0, lam = prior
+        tau = self._tau * self._m_base / len(y)  # the objective's scale of one unit of -2 log posterior
+        A = (G + np.diag(lam)) / tau
+        s = np.sqrt(np.diag(A))
+        s[~(s > 0)] = 1.0
+        cov = np.linalg.pinv(A / np.outer(s, s), hermitian=True) / np.outer(s, s)
+        out = []
+        for j, n in enumerate(names):
+            if not lam[j] > 0:
+                continue
+            sd0 = float(np.sqrt(tau / lam[j]))
+            sd = float(np.sqrt(max(cov[j, j], 0.0)))
+            ratio = sd / sd0
+            est = float(fit.coefs.get(n, theta0[j]))
+            moved = (est - theta0[j]) / sd0
+            if ratio < 0.5:
+                say = f"{n}: determined by the records (posterior sd {ratio:.2f} of the prior's)"
+            elif ratio < 0.9:
+                say = f"{n}: partly determined (posterior sd {ratio:.2f} of the prior's)"
+            else:
+                say = (f"{n}: NOT determined by these records (posterior sd {ratio:.2f} of the prior's): its value "
+                       f"is the prior's, and a prediction that depends on it extrapolates")
+            if abs(moved) > 2.0:
+                say += (f"; moved {moved:+.1f} prior sd from the prior: the records and the prior disagree (a model "
+                        f"error elsewhere can cause this)")
+            out.append({"coefficient": n, "prior": float(theta0[j]), "estimate": est, "prior_sd": sd0,
+                        "posterior_sd": sd, "ratio": ratio, "moved_prior_sd": float(moved), "sentence": say})
+        return out
+
     def fit(self, effects, start: dict | None = None, grid: bool = True, fixed=(), refine: bool = False,
             max_evals: int = 100) -> Fit:
         """Identify the model with ``effects``: each variant of the effects fitted, the best (lowest training

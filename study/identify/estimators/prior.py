@@ -95,6 +95,18 @@ class MapEstimator(Estimator):
         self.prior = prior
         self.interval = interval
 
+    def skip(self, model, structure):
+        """Also skipped: an empirical prior for a model the regressions do not cover (MMG hulls only)."""
+        skip, why = super().skip(model, structure)
+        if skip:
+            return skip, why
+        src = (self.prior or {}).get("source")
+        if src == "empirical" and not (getattr(model, "type", None) == "kind"
+                                        and model.vessel.kind_name == "mmg"):
+            return True, (f"prior.source=empirical: no empirical regressions for model '{model.name}' on a "
+                          f"'{model.vessel.kind_name}' vessel (MMG hulls only); use prior.source=vessel or offset")
+        return False, ""
+
     def fit(self, X, y, prior=None):
         Xa, ya, names = check_regression(X, y)
         k = Xa.shape[1]

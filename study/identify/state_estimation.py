@@ -107,7 +107,7 @@ GAP_FACTOR = 1.5
 #: the largest heading change [rad] of one prediction sub-step
 MAX_TURN_STEP = 0.05
 #: bandwidth grid of the likelihood search: points per decade of omega
-GRID_PER_DECADE = 6
+GRID_PER_DECADE = 4
 
 
 # --------------------------------------------------------------------------------------------- kernels
@@ -191,21 +191,47 @@ def _step(x, h, F, Q, q_u, q_v, q_r):
             Q[i, j] = Q[j, i]
 
 
-@njit(cache=True)
-def _matmul(A, B, out):
-    n = A.shape[0]
-    m = B.shape[1]
-    kk = A.shape[1]
-    for i in range(n):
-        for j in range(m):
-            acc = 0.0
-            for k in range(kk):
-                acc += A[i, k] * B[k, j]
-            out[i, j] = acc
+#: the off-diagonal non-zeros (row, column) of a step's Jacobian F - I (rows 0, 1: positions; then the chains)
+_NZ_I = np.array([0, 0, 0, 0, 0, 0, 1, 1, 1, 1, 1, 1, 2, 2, 3, 4, 5])
+_NZ_K = np.array([2, 3, 4, 5, 6, 7, 2, 3, 4, 5, 6, 7, 5, 8, 6, 7, 8])
 
 
 @njit(cache=True)
-def _ekf(t, Z, R, q_u, q_v, q_r, x_init, P_init, h_max, store):
+def _left(F, A, out, nzi, nzk):
+    """out = F A for a Jacobian F = I + N with the sparse N of ``_NZ_I, _NZ_K`` (17 row updates, not 729)."""
+    for i in range(9):
+        for j in range(9):
+            out[i, j] = A[i, j]
+    for e in range(nzi.shape[0]):
+        i = nzi[e]
+        k = nzk[e]
+        f = F[i, k]
+        for j in range(9):
+            out[i, j] += f * A[k, j]
+
+
+@njit(cache=True)
+def _propagate(F, P, Q, tmp, nzi, nzk):
+    """P <- F P F' + Q (in place), F sparse as in :func:`_left`; symmetric result."""
+    _left(F, P, tmp, nzi, nzk)  # tmp = F P
+    for i in range(9):
+        for j in range(9):
+            P[i, j] = tmp[i, j] + Q[i, j]
+    for e in range(nzi.shape[0]):  # (F P) F' = tmp + tmp N'
+        j = nzi[e]
+        k = nzk[e]
+        f = F[j, k]
+        for i in range(9):
+            P[i, j] += f * tmp[i, k]
+    for i in range(9):
+        for j in range(i):
+            a = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = a
+            P[j, i] = a
+
+
+@njit(cache=True)
+def _ekf(t, Z, R, q_u, q_v, q_r, x_init, P_init, h_max, store, nzi, nzk):
     """The filter over every sample. Z (n, 6): measurements of x0, y0, psi, u, v, r (NaN: none); R (6,)
     variances. Returns (log-likelihood, x_f, P_f, x_p, P_p, Fs); the arrays are filled only with ``store``
     (the smoother's inputs): x_p[k], P_p[k] the prediction at sample k, Fs[k] the Jacobian from k-1 to k."""
@@ -222,7 +248,7 @@ def _ekf(t, Z, R, q_u, q_v, q_r, x_init, P_init, h_max, store):
     Q = np.zeros((9, 9))
     Ft = np.zeros((9, 9))
     tmp = np.zeros((9, 9))
-    tmp2 = np.zeros((9, 9))
+    Pj = np.zeros(9)
     loglik = 0.0
     for k in range(n):
         if k > 0:
@@ -232,29 +258,24 @@ def _ekf(t, Z, R, q_u, q_v, q_r, x_init, P_init, h_max, store):
             if turn > nsub:
                 nsub = min(turn, 1000)
             h = dt / nsub
-            for i in range(9):
-                for j in range(9):
-                    Ft[i, j] = 1.0 if i == j else 0.0
-            for _ in range(nsub):
+            for sub in range(nsub):
                 _step(x, h, F, Q, q_u, q_v, q_r)
-                # P <- F P F' + Q ; Ft <- F Ft
-                _matmul(F, P, tmp)
-                for i in range(9):
-                    for j in range(9):
-                        acc = 0.0
-                        for m in range(9):
-                            acc += tmp[i, m] * F[j, m]
-                        P[i, j] = acc + Q[i, j]
+                _propagate(F, P, Q, tmp, nzi, nzk)
                 if store:
-                    _matmul(F, Ft, tmp2)
-                    for i in range(9):
-                        for j in range(9):
-                            Ft[i, j] = tmp2[i, j]
-            for i in range(9):
-                for j in range(i):
-                    a = 0.5 * (P[i, j] + P[j, i])
-                    P[i, j] = a
-                    P[j, i] = a
+                    if sub == 0:
+                        for i in range(9):
+                            for j in range(9):
+                                Ft[i, j] = F[i, j]
+                    else:  # Ft <- F Ft (a dense product: rare, only over dropouts and fast turns)
+                        for i in range(9):
+                            for j in range(9):
+                                acc = 0.0
+                                for m in range(9):
+                                    acc += F[i, m] * Ft[m, j]
+                                tmp[i, j] = acc
+                        for i in range(9):
+                            for j in range(9):
+                                Ft[i, j] = tmp[i, j]
         if store:
             x_p[k] = x
             P_p[k] = P
@@ -271,16 +292,48 @@ def _ekf(t, Z, R, q_u, q_v, q_r, x_init, P_init, h_max, store):
             if not s > 0.0:
                 continue
             loglik += -0.5 * (math.log(2.0 * math.pi * s) + nu * nu / s)
-            Pj = P[:, j].copy()
             for i in range(9):
-                x[i] += Pj[i] / s * nu
+                Pj[i] = P[i, j]
+            g = nu / s
             for i in range(9):
+                x[i] += Pj[i] * g
+            for i in range(9):
+                a = Pj[i] / s
                 for m in range(9):
-                    P[i, m] -= Pj[i] * Pj[m] / s
+                    P[i, m] -= a * Pj[m]
         if store:
             x_f[k] = x
             P_f[k] = P
     return loglik, x_f, P_f, x_p, P_p, Fs
+
+
+@njit(cache=True)
+def _chol_solve(A, B, L, out):
+    """out = A^-1 B for a symmetric positive definite 9 x 9 A (Cholesky, no allocation); returns False if A is
+    not positive definite."""
+    for i in range(9):
+        for j in range(i + 1):
+            acc = A[i, j]
+            for m in range(j):
+                acc -= L[i, m] * L[j, m]
+            if i == j:
+                if not acc > 0.0:
+                    return False
+                L[i, i] = math.sqrt(acc)
+            else:
+                L[i, j] = acc / L[j, j]
+    for c in range(B.shape[1]):
+        for i in range(9):  # forward: L y = b
+            acc = B[i, c]
+            for m in range(i):
+                acc -= L[i, m] * out[m, c]
+            out[i, c] = acc / L[i, i]
+        for i in range(8, -1, -1):  # backward: L' x = y
+            acc = out[i, c]
+            for m in range(i + 1, 9):
+                acc -= L[m, i] * out[m, c]
+            out[i, c] = acc / L[i, i]
+    return True
 
 
 @njit(cache=True)
@@ -290,36 +343,62 @@ def _rts(x_f, P_f, x_p, P_p, Fs):
     xs = x_f.copy()
     Ps = P_f.copy()
     tmp = np.zeros((9, 9))
-    C = np.zeros((9, 9))
+    Ct = np.zeros((9, 9))
+    L = np.zeros((9, 9))
     dP = np.zeros((9, 9))
+    dx = np.zeros(9)
     for k in range(n - 2, -1, -1):
         # C = P_f[k] F' inv(P_p[k+1]):  C' = solve(P_p[k+1], F P_f[k])
-        _matmul(Fs[k + 1], P_f[k], tmp)
-        Ct = np.linalg.solve(P_p[k + 1], tmp)
-        for i in range(9):
-            for j in range(9):
-                C[i, j] = Ct[j, i]
-        dx = xs[k + 1] - x_p[k + 1]
-        for i in range(9):
-            acc = 0.0
-            for j in range(9):
-                acc += C[i, j] * dx[j]
-            xs[k, i] = x_f[k, i] + acc
-        for i in range(9):
-            for j in range(9):
-                dP[i, j] = Ps[k + 1, i, j] - P_p[k + 1, i, j]
-        _matmul(C, dP, tmp)
+        F = Fs[k + 1]
         for i in range(9):
             for j in range(9):
                 acc = 0.0
                 for m in range(9):
-                    acc += tmp[i, m] * C[j, m]
+                    acc += F[i, m] * P_f[k, m, j]
+                tmp[i, j] = acc
+        if not _chol_solve(P_p[k + 1], tmp, L, Ct):
+            Ct[:, :] = np.linalg.solve(P_p[k + 1], tmp)
+        for i in range(9):
+            dx[i] = xs[k + 1, i] - x_p[k + 1, i]
+        for i in range(9):
+            acc = 0.0
+            for j in range(9):
+                acc += Ct[j, i] * dx[j]
+            xs[k, i] = x_f[k, i] + acc
+        for i in range(9):
+            for j in range(9):
+                dP[i, j] = Ps[k + 1, i, j] - P_p[k + 1, i, j]
+        for i in range(9):  # tmp = C dP
+            for j in range(9):
+                acc = 0.0
+                for m in range(9):
+                    acc += Ct[m, i] * dP[m, j]
+                tmp[i, j] = acc
+        for i in range(9):  # Ps[k] = P_f[k] + C dP C'
+            for j in range(i + 1):
+                acc = 0.0
+                for m in range(9):
+                    acc += tmp[i, m] * Ct[m, j]
                 Ps[k, i, j] = P_f[k, i, j] + acc
+                Ps[k, j, i] = Ps[k, i, j]
     sd = np.zeros((n, 9))
     for k in range(n):
         for i in range(9):
             sd[k, i] = math.sqrt(max(Ps[k, i, i], 0.0))
     return xs, sd
+
+
+@njit(cache=True)
+def _matmul(A, B, out):
+    n = A.shape[0]
+    m = B.shape[1]
+    kk = A.shape[1]
+    for i in range(n):
+        for j in range(m):
+            acc = 0.0
+            for k in range(kk):
+                acc += A[i, k] * B[k, j]
+            out[i, j] = acc
 
 
 @njit(cache=True)
@@ -511,14 +590,16 @@ def estimate_states(data, options: dict | None = None, **kw) -> StateEstimate:
     """
     t_start = time.perf_counter()
     opts = resolve_options({**(options or {}), **kw})
-    t = np.asarray(data["time"], float).reshape(-1)
+    # writable, C-contiguous float64 copies: one compiled signature of each kernel (a read-only or strided
+    # array would make numba compile another)
+    t = np.array(data["time"], dtype=np.float64, order="C").reshape(-1)
     n = len(t)
     if n < 5:
         raise ValueError(f"state estimation needs at least 5 samples, got {n}")
     dts = np.diff(t)
     if not np.all(dts > 0):
         raise ValueError("state estimation: time must be strictly increasing")
-    Z = np.column_stack([_column(data, c, n) for c in CHANNELS])
+    Z = np.ascontiguousarray(np.column_stack([_column(data, c, n) for c in CHANNELS]), dtype=np.float64)
     for j, c in enumerate(("x0", "y0", "psi")):
         if np.sum(np.isfinite(Z[:, j])) < 5:
             raise ValueError(f"state estimation: column '{c}' has fewer than 5 values; positions x0, y0 and the "
@@ -598,9 +679,9 @@ def estimate_states(data, options: dict | None = None, **kw) -> StateEstimate:
         info["process_how"] = "given"
     else:
         Rp = std_used["psi"] ** 2
-        psi_m = np.ascontiguousarray(Z[:, 2])
-        r_m = np.ascontiguousarray(Z[:, 5])
-        Ry = np.ascontiguousarray(P_init[np.ix_([2, 5, 8], [2, 5, 8])])
+        psi_m = np.array(Z[:, 2], order="C")
+        r_m = np.array(Z[:, 5], order="C")
+        Ry = np.array(P_init[np.ix_([2, 5, 8], [2, 5, 8])], order="C")
         xy = np.array([x_init[2], x_init[5], 0.0])
         R_r = R[5]
 
@@ -614,7 +695,7 @@ def estimate_states(data, options: dict | None = None, **kw) -> StateEstimate:
 
         def full_ll(g):
             q = Rx * h * (10.0 ** g) ** 6
-            return _ekf(t, Z, R, q, q, q_r, x_init, P_init, h_max, False)[0]
+            return _ekf(t, Z, R, q, q, q_r, x_init, P_init, h_max, False, _NZ_I, _NZ_K)[0]
 
         g_uv, ll, ev_uv = _optimise(full_ll, lo, hi)
         q_uv = Rx * h * (10.0 ** g_uv) ** 6
@@ -624,7 +705,7 @@ def estimate_states(data, options: dict | None = None, **kw) -> StateEstimate:
                               if min(abs(g - lo), abs(g - hi)) < 1e-6],
                     evaluations=int(ev_r + ev_uv))
 
-    ll, x_f, P_f, x_p, P_p, Fs = _ekf(t, Z, R, q_uv, q_uv, q_r, x_init, P_init, h_max, True)
+    ll, x_f, P_f, x_p, P_p, Fs = _ekf(t, Z, R, q_uv, q_uv, q_r, x_init, P_init, h_max, True, _NZ_I, _NZ_K)
     xs, sd = _rts(x_f, P_f, x_p, P_p, Fs)
     frame = pd.DataFrame({"time": t, **{s: xs[:, i] for i, s in enumerate(STATES)}})
     std = pd.DataFrame({"time": t, **{s: sd[:, i] for i, s in enumerate(STATES)}})

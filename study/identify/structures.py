@@ -17,7 +17,12 @@ becomes the rows ``d(x, p) = sum_i theta_i value(f_i(nodes))``:
   against a hat function over two intervals instead, so that again no derivative of the data is taken.
 - ``smoothed``: Savitzky-Golay (Savitzky & Golay 1964; ``scipy.signal.savgol_filter``): the regressors are
   evaluated on the smoothed states, the derivatives are the filter's derivatives of the raw signals; the half
-  window at each end is dropped (the end fits are one-sided).
+  window at each end is dropped (the end fits are one-sided). With ``smoothing.method: rts`` the states
+  ``u, v, r`` and their derivatives come instead from an extended Kalman filter with a Rauch-Tung-Striebel
+  smoother over the segment's positions, heading and measured ``u, v, r``
+  (``study.identify.state_estimation``; options under ``smoothing.rts``); every other signal (rudder,
+  propeller, wind...) is smoothed and differentiated by Savitzky-Golay as before, and the same rows are kept
+  (the half window at each end dropped), so the two methods differ only in the states.
 - ``diff_center``: a base structure (``euler`` as in seed 000), then its rows differenced,
   y_k - rho y_k-1 = (phi_k - rho phi_k-1) theta (seed 000 eqs. 15-17, rho = 1), then centred (eq. 18: every
   column minus its mean over the training rows).
@@ -213,6 +218,46 @@ class SavGolOps(Ops):
         return savgol_interior(np.asarray(X, float), self.window, self.polyorder, p, self.h)[self.rows]
 
 
+class RtsOps(SavGolOps):
+    """Savitzky-Golay rows whose derivatives of the measured ``u, v, r`` are the RTS smoother's ``u_dot, v_dot,
+    r_dot`` (``smoothing.method: rts``). A column of ``X`` is recognised as one of the segment's measured
+    ``u, v, r`` by its values; any other signal (rudder, propeller, or a column an effect has transformed, such
+    as the doctor's water-relative velocities) is differentiated by Savitzky-Golay as in :class:`SavGolOps`.
+    A second derivative is the Savitzky-Golay first derivative of the smoother's (smooth) first derivative.
+    ``raw``: the measured ``u, v, r`` the smoother used; ``est``: its states and derivatives."""
+
+    def __init__(self, t, window: int, polyorder: int, raw: dict, est: dict):
+        super().__init__(t, window, polyorder)
+        self.raw = raw
+        self.est = est
+
+    def _channel(self, col: np.ndarray):
+        for c in ("u", "v", "r"):
+            a = self.raw.get(c)
+            if a is not None and a.shape == col.shape and np.array_equal(a, col):
+                return c
+        return None
+
+    def _d_col(self, col: np.ndarray, p: int) -> np.ndarray:
+        c = self._channel(col)
+        if c is None:
+            return savgol_interior(col, self.window, self.polyorder, p, self.h)[self.rows]
+        d1 = self.est[c + "_dot"]
+        if p == 1:
+            return d1[self.rows]
+        return savgol_interior(d1, self.window, self.polyorder, p - 1, self.h)[self.rows]
+
+    def d(self, X, p):
+        if p > self.polyorder:
+            raise ValueError(f"smoothed: derivative order {p} needs polyorder >= {p}, got {self.polyorder}")
+        X = np.asarray(X, float)
+        if X.ndim == 1:
+            return self._d_col(X, p)
+        flat = X.reshape(len(X), -1)
+        out = np.column_stack([self._d_col(flat[:, j], p) for j in range(flat.shape[1])])
+        return out.reshape((len(self.rows),) + X.shape[1:])
+
+
 @lru_cache(maxsize=64)
 def _savgol_coeffs(window: int, polyorder: int, deriv: int, delta: float) -> np.ndarray:
     from scipy.signal import savgol_coeffs
@@ -249,6 +294,37 @@ class Structure:
     select: dict = field(default_factory=dict)  # {n_rows: k}: k evenly spaced training rows (seed 003: 100)
     rate_from_heading: bool = False  # r replaced by the central difference of psi (seed 004 eq. 14)
     source: str = ""
+    _rts_cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    # -- smoothing method of the smoothed structure: savgol (default) or rts
+    @property
+    def method(self) -> str:
+        return str((self.smoothing or {}).get("method") or "savgol")
+
+    def rts_states(self, seg: Segment) -> tuple[dict, dict] | None:
+        """``(inputs, states)`` of a segment: the measured ``u, v, r`` the estimate used, and ``u, v, r, u_dot,
+        v_dot, r_dot`` from the EKF + RTS smoother (``smoothing.rts`` options). Cached on the segment's times,
+        positions and heading, so that a segment whose ``u, v`` an effect has changed (the doctor's
+        water-relative velocities) reuses the estimate of the measured one; None when the segment has no
+        positions and heading (a partial segment of changed columns: smoothed by Savitzky-Golay)."""
+        need = ("x0", "y0", "psi")
+        if not all(c in seg.data for c in need):
+            return None
+        from .state_estimation import estimate_states
+
+        key = (len(seg.t), hash(np.asarray(seg.t, float).tobytes()),
+               tuple(hash(np.asarray(seg.data[c], float).tobytes()) for c in need))
+        hit = self._rts_cache.get(key)
+        if hit is None:
+            cols = [c for c in ("x0", "y0", "psi", "u", "v", "r") if c in seg.data]
+            data = {"time": seg.t, **{c: seg.data[c] for c in cols}}
+            est = estimate_states(data, (self.smoothing or {}).get("rts") or {})
+            hit = ({c: np.array(seg.data[c], float) for c in ("u", "v", "r") if c in seg.data},
+                   {c: est.frame[c].to_numpy() for c in ("u", "v", "r", "u_dot", "v_dot", "r_dot")})
+            if len(self._rts_cache) >= 256:
+                self._rts_cache.pop(next(iter(self._rts_cache)))
+            self._rts_cache[key] = hit
+        return hit
 
     # -- segments and operators
     def min_nodes(self, order: int) -> int:
@@ -281,7 +357,11 @@ class Structure:
                 raise ValueError(f"structure 'smoothed': Savitzky-Golay needs a uniform time step; a segment of "
                                  f"record {seg.record} has steps from {dt.min():.4g} to {dt.max():.4g} s "
                                  "(resample it first)")
-            return SavGolOps(t, self.window_samples(t), int((self.smoothing or {}).get("polyorder", 3)))
+            w, p = self.window_samples(t), int((self.smoothing or {}).get("polyorder", 3))
+            hit = self.rts_states(seg) if self.method == "rts" else None
+            if hit is not None:
+                return RtsOps(t, w, p, *hit)
+            return SavGolOps(t, w, p)
         raise ValueError(f"structure '{self.name}' ({self.kind}) builds no regression rows")
 
     def measured(self, seg: Segment) -> Segment:
@@ -303,7 +383,15 @@ class Structure:
             return seg.data
         w = self.window_samples(seg.t)
         p = int((self.smoothing or {}).get("polyorder", 3))
-        return {c: savgol_interior(np.asarray(a, float), w, p) for c, a in seg.data.items()}
+        hit = self.rts_states(seg) if self.method == "rts" else None
+        out = {}
+        for c, a in seg.data.items():
+            a = np.asarray(a, float)
+            if hit is not None and c in hit[0] and np.array_equal(a, hit[0][c]):
+                out[c] = hit[1][c]  # the smoother's state (a column an effect changed: Savitzky-Golay below)
+            else:
+                out[c] = savgol_interior(a, w, p)
+        return out
 
     # -- rows after the model built them (per equation)
     def postprocess(self, Phi: np.ndarray, y: np.ndarray, seg_id: np.ndarray, seed: int = 0):
@@ -368,6 +456,8 @@ class Structure:
 
 
 STRUCTURE_KINDS = ("euler", "central", "integral", "smoothed", "output_error")
+#: how the smoothed structure gets its states and derivatives
+SMOOTHING_METHODS = ("savgol", "rts")
 
 
 def make_structure(cfg) -> Structure:
@@ -390,6 +480,17 @@ def make_structure(cfg) -> Structure:
     extra = sorted(set(cfg) - known)
     if extra:
         raise ValueError(f"structure '{name}': unknown key(s) {extra}; known: {sorted(known)}")
+    sm = dict(cfg.get("smoothing") or {})
+    method = sm.get("method") or "savgol"
+    if method not in SMOOTHING_METHODS:
+        raise ValueError(f"structure '{name}': smoothing.method '{method}'; expected one of {SMOOTHING_METHODS}")
+    if method == "rts":
+        if kind != "smoothed":
+            raise ValueError(f"structure '{name}': smoothing.method rts belongs to the smoothed structure, not "
+                             f"'{kind}'")
+        from .state_estimation import resolve_options
+
+        resolve_options(sm.get("rts"))  # a misspelt option fails here, before any run
     return Structure(name=name, kind=kind, simulates=kind == "output_error", base=base,
                      difference=cfg.get("difference"), center=bool(cfg.get("center", False)),
                      clean=dict(cfg.get("clean") or {}), split=dict(cfg.get("split") or {}),

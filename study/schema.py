@@ -75,13 +75,22 @@ def _where(path) -> str:
     return str(path) if path else "<in-memory record>"
 
 
-def validate(df: pd.DataFrame, path=None, min_samples: int = 20) -> None:
-    """Raise :class:`SchemaError` if ``df`` is not a valid record; extra columns are allowed and kept."""
+#: how ``read_record(s)`` gets the body velocities u, v, r (see :func:`read_record`)
+STATES = ("measured", "auto", "ekf")
+#: the columns the state estimator can supply
+ESTIMABLE = ("u", "v", "r")
+#: and what it needs
+ESTIMATOR_INPUTS = ("x0", "y0", "psi")
+
+
+def validate(df: pd.DataFrame, path=None, min_samples: int = 20, hint: str = "") -> None:
+    """Raise :class:`SchemaError` if ``df`` is not a valid record; extra columns are allowed and kept.
+    ``hint``: appended to the message of missing columns (how else the record could be read)."""
     where = _where(path)
     missing = [c for c in REQUIRED if c not in df.columns]
     if missing:
         raise SchemaError(f"{where}: missing required column(s) {missing}; found {list(df.columns)}. "
-                          f"Required: {list(REQUIRED)} (see docs/schema.md)")
+                          f"Required: {list(REQUIRED)} (see docs/schema.md){hint}")
     if len(df) < min_samples:
         raise SchemaError(f"{where}: too short: {len(df)} samples, at least {min_samples} are needed")
     known = [c.name for c in COLUMNS if c.name in df.columns]
@@ -133,8 +142,27 @@ def _jsonable(meta: dict) -> dict:
     return json.loads(json.dumps(meta, default=lambda o: o.item() if hasattr(o, "item") else str(o)))
 
 
-def read_record(path, min_samples: int = 20) -> Record:
-    """Read and validate a record from ``.csv`` (``# key: value`` metadata lines) or ``.parquet``."""
+def read_record(path, min_samples: int = 20, states: str = "measured", state_options: dict | None = None) -> Record:
+    """Read and validate a record from ``.csv`` (``# key: value`` metadata lines) or ``.parquet``.
+
+    ``states`` says where the body velocities ``u, v, r`` come from:
+
+    - ``"measured"`` (default): the record must have them (a missing one is an error naming the file and the
+      column, and mentioning this option);
+    - ``"auto"``: a record without (some of) ``u, v, r`` but with positions ``x0, y0`` and heading ``psi`` gets
+      them estimated by the extended Kalman filter and RTS smoother of ``study.identify.state_estimation``
+      (those it has are used as measurements and refined); a record that has all three is read as measured;
+    - ``"ekf"``: always estimated (measured ``u, v, r`` refined).
+
+    An estimated record has ``u, v, r`` replaced (or added after ``time``) and ``u_dot, v_dot, r_dot`` added
+    (positions and heading stay as measured), and its metadata say so: ``meta["states"] = "ekf"``,
+    ``meta["state_estimation"]`` the filter's settings (noise standard deviations, process noise, how each was
+    chosen). ``state_options``: the estimator's options (``state_estimation.DEFAULTS``: absolute standard
+    deviations ``position_std`` [m], ``heading_std`` [rad], ``u_std``, ``v_std`` [m/s], ``r_std`` [rad/s], or
+    ``"auto"``; ``process``).
+    """
+    if states not in STATES:
+        raise ValueError(f"read_record: states='{states}'; expected one of {list(STATES)}")
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such record file")
@@ -170,10 +198,47 @@ def read_record(path, min_samples: int = 20) -> Record:
         raw = (table.schema.metadata or {}).get(META_KEY)
         meta = json.loads(raw) if raw else {}
         df = table.to_pandas()
-    validate(df, path, min_samples=min_samples)
+    lacking = [c for c in ESTIMABLE if c not in df.columns]
+    if states == "measured" or (states == "auto" and not lacking):
+        hint = ""
+        if lacking and all(c in df.columns for c in ESTIMATOR_INPUTS):
+            hint = (f"; to estimate {lacking} from x0, y0, psi (EKF + RTS smoother), read it with "
+                    f"states='auto' (on the command line: states=auto)")
+        validate(df, path, min_samples=min_samples, hint=hint)
+    else:
+        df, meta = _estimate_states(df, meta, path, min_samples, lacking, state_options)
     known = [c.name for c in COLUMNS if c.name in df.columns]
     df[known] = df[known].astype(float)  # CSV gives int64 for whole numbers
     return Record(data=df, meta=meta, path=str(path))
+
+
+def _estimate_states(df: pd.DataFrame, meta: dict, path, min_samples: int, lacking: list,
+                     state_options: dict | None) -> tuple[pd.DataFrame, dict]:
+    """The record with u, v, r (and u_dot, v_dot, r_dot) from the state estimator; validated before (with
+    stand-ins for the missing u, v, r, so that every other problem gets its usual message) and after."""
+    need = [c for c in ESTIMATOR_INPUTS if c not in df.columns]
+    if need:
+        validate(df, path, min_samples=min_samples,
+                 hint=f"; estimating {lacking or list(ESTIMABLE)} needs the positions and heading "
+                      f"{list(ESTIMATOR_INPUTS)}")
+    stand_in = df.assign(**{c: 0.0 for c in lacking})
+    validate(stand_in, path, min_samples=min_samples)
+    from .identify.state_estimation import apply_to_frame
+
+    src = df.copy()
+    for c in ("time",) + ESTIMATOR_INPUTS + tuple(c for c in ESTIMABLE if c in df.columns):
+        src[c] = src[c].astype(float)
+    try:
+        out, settings = apply_to_frame(src, state_options)
+    except ValueError as exc:
+        raise SchemaError(f"{_where(path)}: estimating u, v, r failed: {exc}") from exc
+    validate(out, path, min_samples=min_samples)
+    meta = dict(meta)
+    meta["states"] = "ekf"
+    settings = {k: v for k, v in settings.items() if k != "seconds"}  # metadata stay reproducible
+    meta["state_estimation"] = _jsonable({**settings, "estimated": lacking, "refined": [
+        c for c in ESTIMABLE if c not in lacking and c in settings.get("measured", [])]})
+    return out, meta
 
 
 def write_record(record: Record, path, overwrite: bool = False) -> Path:
@@ -208,8 +273,12 @@ def write_record(record: Record, path, overwrite: bool = False) -> Path:
     return path
 
 
-def read_records(spec, min_samples: int = 20) -> list[Record]:
-    """Records from a file, a folder (every .csv/.parquet inside, sorted) or a glob pattern."""
+def read_records(spec, min_samples: int = 20, states: str = "measured",
+                 state_options: dict | None = None) -> list[Record]:
+    """Records from a file, a folder (every .csv/.parquet inside, sorted) or a glob pattern; ``states`` and
+    ``state_options`` as in :func:`read_record`."""
+    if states not in STATES:
+        raise ValueError(f"read_records: states='{states}'; expected one of {list(STATES)}")
     p = Path(str(spec)).expanduser()
     if p.is_file():
         files = [p]
@@ -219,4 +288,4 @@ def read_records(spec, min_samples: int = 20) -> list[Record]:
         files = sorted(Path(f) for f in globmod.glob(str(spec)) if Path(f).suffix.lower() in SUPPORTED)
     if not files:
         raise FileNotFoundError(f"{spec}: no record files (.csv/.parquet) found")
-    return [read_record(f, min_samples=min_samples) for f in files]
+    return [read_record(f, min_samples=min_samples, states=states, state_options=state_options) for f in files]

@@ -29,10 +29,15 @@ def _is_real(path: Path) -> bool:
     return False
 
 
-def load_records(spec) -> list:
-    """Records from a file, folder or glob: schema files, or the real datasets' own formats."""
+def load_records(spec, states: str = "measured", state_options: dict | None = None) -> list:
+    """Records from a file, folder or glob: schema files, or the real datasets' own formats. ``states``
+    (``measured | auto | ekf``) and ``state_options``: where u, v, r come from (``study.schema.read_record``;
+    the real datasets' loaders always give u, v, r, which ``ekf`` refines)."""
     from .loaders import load_real
-    from .schema import SUPPORTED, read_record
+    from .schema import STATES, SUPPORTED, read_record, with_estimated_states
+
+    if states not in STATES:
+        raise ValueError(f"states={states}: expected one of {list(STATES)}")
 
     p = Path(str(spec)).expanduser()
     if p.is_file():
@@ -45,7 +50,12 @@ def load_records(spec) -> list:
         raise FileNotFoundError(f"{spec}: no record files (.csv, .parquet, .dat) found")
     out = []
     for f in files:
-        rec = load_real(f) if _is_real(f) else read_record(f)
+        if _is_real(f):
+            rec = load_real(f)
+            if states == "ekf":
+                rec = with_estimated_states(rec, state_options)
+        else:
+            rec = read_record(f, states=states, state_options=state_options)
         rec.meta.setdefault("name", f.stem)
         out.append(rec)
     return out
@@ -122,8 +132,9 @@ def run(conf: dict) -> dict:
     out = Path(conf["out"])
     if (out / "report.json").exists() and not conf.get("overwrite"):  # before any work
         raise FileExistsError(f"{out / 'report.json'} exists; refusing to overwrite it (pass overwrite=true)")
-    train = load_records(conf["train"])
-    validate = load_records(conf["validate"]) if conf.get("validate") else []
+    read = {"states": conf.get("states") or "measured", "state_options": conf.get("state_options") or None}
+    train = load_records(conf["train"], **read)
+    validate = load_records(conf["validate"], **read) if conf.get("validate") else []
     _use_rudder(train + validate, conf.get("rudder", "delta"))
     depth = conf.get("depth") or {}
     vessel_cfg = conf["vessel"]

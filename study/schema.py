@@ -212,6 +212,14 @@ def read_record(path, min_samples: int = 20, states: str = "measured", state_opt
     return Record(data=df, meta=meta, path=str(path))
 
 
+def with_estimated_states(record: Record, state_options: dict | None = None, min_samples: int = 20) -> Record:
+    """A valid record (any loader's) with ``u, v, r`` estimated and refined as ``read_record(...,
+    states="ekf")`` does; the record itself is not changed."""
+    df, meta = _estimate_states(record.data, record.meta, record.path, min_samples,
+                                [c for c in ESTIMABLE if c not in record.data.columns], state_options)
+    return Record(data=df, meta=meta, path=record.path)
+
+
 def _estimate_states(df: pd.DataFrame, meta: dict, path, min_samples: int, lacking: list,
                      state_options: dict | None) -> tuple[pd.DataFrame, dict]:
     """The record with u, v, r (and u_dot, v_dot, r_dot) from the state estimator; validated before (with

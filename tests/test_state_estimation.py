@@ -21,7 +21,6 @@ measured value it guards (three noise seeds, both scales):
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pandas as pd
@@ -184,18 +183,6 @@ def test_wrapped_heading_gives_the_same_estimate():
     assert diff <= 1e-3, (c, diff)
     assert np.ptp(wrapped["psi"]) == pytest.approx(np.ptp(truth["psi"]), abs=0.05)
     assert np.max(np.abs(np.diff(wrapped["psi"]))) < 0.1
-
-
-def test_speed_of_a_4000_sample_record():
-    """Well under a second for 4,000 samples, process noise by maximum likelihood included (measured about
-    0.15 s on this 2-core machine); the first call compiles (numba, cached on disk) and is not timed."""
-    vessel, dt, pos_std = SCALES["model_scale"]
-    meas = gnss(clean_record(vessel, "turning_35", dt), pos_std).iloc[:4000]
-    assert len(meas) == 4000
-    estimate_states(meas.iloc[:200])
-    t0 = time.perf_counter()
-    estimate_states(meas)
-    assert time.perf_counter() - t0 < 1.0
 
 
 # ------------------------------------------------------------------------------------------------ loader

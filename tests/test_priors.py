@@ -52,21 +52,23 @@ def test_esso_osaka_has_its_own_empirical_hull_not_kvlcc2s():
 def test_map_identifiability_separates_determined_from_undetermined_coefficients():
     """The MMG hull of KVLCC2 from noisy zigzags and a random-rudder run, with a prior 20 % off the truth
     (alternately above and below). Where the records determine a coefficient (posterior sd under a third of the
-    prior's), the estimate moved from the prior towards the truth; where they do not (over 0.9: the records'
-    weight 1 - 0.9^2 = 19 % at most), it stayed within half a prior sd of the prior, while the prior was 20 % (of
-    the size) off: the figure says which coefficients the records carry."""
+    prior's), the estimate moved from the prior to the truth (median error under a fifth of the prior's, each
+    within 3 posterior sd of the truth); where they do not (over 0.8), the error stayed of the prior's size or
+    grew (median over 0.8 of it): the figure says which coefficients the records carry. The prior agrees with
+    the records within its width, so it is not widened."""
     res = _run("estimator=map", "estimator.params.prior.source=offset", "estimator.params.prior.offset=0.2",
                "maneuvers.validate=[]")
     p = pd.DataFrame(res["params"])
     assert {"prior_mean", "prior_sd", "identifiability"} <= set(p.columns)
+    p["err_ratio"] = (p["estimate"] - p["truth"]).abs() / (p["prior_mean"] - p["truth"]).abs()
     det = p[p["identifiability"] < 0.33]
-    und = p[p["identifiability"] > 0.9]
+    und = p[p["identifiability"] > 0.8]
     assert len(det) >= 4 and len(und) >= 4, p[["name", "identifiability"]]
-    err_est = (det["estimate"] - det["truth"]).abs()
-    err_prior = (det["prior_mean"] - det["truth"]).abs()
-    assert (err_est < 0.5 * err_prior).all(), det[["name", "estimate", "truth", "prior_mean"]]
-    assert ((und["estimate"] - und["prior_mean"]).abs() < 0.5 * und["prior_sd"]).all()
+    assert det["err_ratio"].median() < 0.2, det[["name", "estimate", "truth", "prior_mean"]]
+    assert ((det["estimate"] - det["truth"]).abs() < 3 * det["std"]).all(), det[["name", "estimate", "truth", "std"]]
+    assert und["err_ratio"].median() > 0.8, und[["name", "estimate", "truth", "prior_mean"]]
     assert res["metrics"]["prior_is_truth"] == 0.0 and res["metrics"]["prior_source"] == "offset"
+    assert all(res["metrics"][f"est_{eq}_prior_widening"] == 1.0 for eq in "XYN")
 
 
 def test_empirical_prior_beats_least_squares_on_a_turn_the_zigzags_do_not_contain():
@@ -88,7 +90,7 @@ def res_ok(res) -> bool:
 
 
 def test_emcee_under_the_prior_agrees_with_the_map_estimate():
-    """emcee samples the same posterior the MAP estimator approximates (Gaussian prior, HAC-weighted data): the
+    """emcee samples the same posterior the MAP estimator approximates (Gaussian prior, block-robust data covariance): the
     posterior medians agree with the MAP estimates to a fraction of a posterior sd on the AUV's yaw equation."""
     common = ["case=auv", "maneuvers.validate=[]"]
     m = pd.DataFrame(_run("estimator=map", "estimator.params.prior.source=offset", *common)["params"])
@@ -117,3 +119,65 @@ def test_doctor_reports_which_coefficients_the_records_determine():
         assert abs(rows[n]["estimate"] - t) < 0.5 * abs(rows[n]["prior"] - t), rows[n]
     und = [r for r in rows.values() if r["ratio"] > 0.9]
     assert und and all("NOT determined" in r["sentence"] for r in und)
+
+
+def _replicates(kind: str, reps: int = 200, n: int = 3000, dt: float = 0.1, seed: int = 1):
+    """Least-squares estimates and their block-robust standard errors over replicated records of a smooth
+    three-term regression with residuals of one kind."""
+    from scipy.signal import lfilter
+
+    from study.identify.estimators.prior import data_covariance
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * dt
+    X = np.column_stack([np.sin(0.05 * t), np.cos(0.031 * t) * np.sin(0.011 * t + 1), np.sin(0.05 * t) ** 3])
+    theta = np.array([1.0, -0.5, 0.3])
+    est, se = [], []
+    for _ in range(reps):
+        if kind == "differenced":  # a central difference of white noise, as a measured derivative has
+            m = rng.normal(0, 0.01, n + 2)
+            e = (m[2:] - m[:-2]) / (2 * dt) + rng.normal(0, 0.002, n)
+        elif kind == "ar1":  # a slowly varying misfit, as a model error gives
+            e = lfilter([1.0], [1.0, -0.98], rng.normal(0, 0.01, n))
+        else:
+            e = rng.normal(0, 0.05, n)
+        b, V, _ = data_covariance(X, X @ theta + e)
+        est.append(b)
+        se.append(np.sqrt(np.diag(V)))
+    return np.mean(se, axis=0) / np.std(est, axis=0)
+
+
+@pytest.mark.parametrize("kind", ["white", "ar1"])
+def test_data_covariance_is_calibrated_for_white_and_slowly_correlated_residuals(kind):
+    """The records' covariance (consecutive blocks, cluster-robust) states the spread of the estimates over
+    replicated records: mean standard error / actual spread within 0.6-1.5 for white residuals and for an AR(1)
+    misfit correlated over ~50 samples (where counting rows as independent understates it 8-11 times)."""
+    ratio = _replicates(kind)
+    assert np.all((ratio > 0.6) & (ratio < 1.5)), ratio
+
+
+def test_data_covariance_never_understates_differenced_noise():
+    """Central differences of white noise cancel when summed; the block covariance sees the cancellation inside
+    each block but not across the block edges, so it overstates the spread (by 1.3-3.7 times on this smooth
+    synthetic case, 1.1-1.3 on simulated KVLCC2 and KCS hulls), and never understates it."""
+    ratio = _replicates("differenced")
+    assert np.all(ratio > 0.9), ratio
+
+
+def test_prior_widening_is_one_when_the_records_agree_and_large_when_they_contradict():
+    """Empirical Bayes on the prior's width: a prior within its stated sd of the records' estimate is kept as
+    stated; one 20 sd away is widened (at least 5 times), and the MAP estimate then follows the records."""
+    from study.identify.estimators.prior import gaussian_posterior
+
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(2000, 3))
+    theta = np.array([1.0, -2.0, 0.5])
+    y = X @ theta + rng.normal(0, 0.1, 2000)
+    sd0 = np.full(3, 0.05)
+    m, _, d = gaussian_posterior(X, y, theta + 0.5 * sd0 * np.array([1, -1, 1]), sd0)
+    assert d["prior_widening"] == 1.0
+    m, _, d = gaussian_posterior(X, y, theta + 20 * sd0 * np.array([1, -1, 1]), sd0)
+    assert d["prior_widening"] > 5.0
+    assert np.all(np.abs(m - theta) < 0.1 * 20 * sd0), m
+    m, _, d = gaussian_posterior(X, y, theta + 20 * sd0 * np.array([1, -1, 1]), sd0, widen=False)
+    assert d["prior_widening"] == 1.0

@@ -197,7 +197,7 @@ class EmceeSampler(Estimator):
 
     def _fit_informative(self, X, y, names, prior: dict, progress: bool):
         """The posterior under the run's informative prior N(mean0, sd0^2) per coefficient and the records'
-        sandwich likelihood (least squares with its HAC covariance: the MAP estimator's model, module
+        sandwich likelihood (least squares with its block cluster-robust covariance: the MAP estimator's model, module
         ``prior``). That posterior is Gaussian; emcee samples it so that the draws feed the predictive bands
         and the chain diagnostics like any other run's."""
         from .prior import gaussian_posterior
@@ -219,9 +219,10 @@ class EmceeSampler(Estimator):
         p0 = m_map + rng.standard_normal((nw, k)) @ L.T
         flat, q = self._sample(log_prob, p0, list(names), progress)
         self._summarise(flat, q, k)
-        self.diagnostics_.update({"rho": diag["rho"], "hac_lags": diag["hac_lags"]})
+        self.diagnostics_.update({"rho": diag["rho"], "data_blocks": diag["data_blocks"],
+                                  "prior_widening": diag["prior_widening"]})
         self.prior_mean_, self.prior_sd_ = mean0, sd0
-        self.identifiability_ = np.std(self.samples_, axis=0) / sd0
+        self.identifiability_ = np.std(self.samples_, axis=0) / (diag["prior_widening"] * sd0)
         return self
 
     # ---------------------------------------------------------------------------------- output error

@@ -85,6 +85,43 @@ def test_empirical_prior_beats_least_squares_on_a_turn_the_zigzags_do_not_contai
     assert res_ok(emp)
 
 
+def _val_error(res) -> float:
+    m = res["metrics"]
+    return float(np.mean([v for k, v in m.items() if k.startswith("val_") and "_nrmse_" in k]))
+
+
+@pytest.mark.parametrize("case", [("kvlcc2", "mmg_hull"), ("kcs", "mmg_hull"), ("usv_waterjet", "usv_full"),
+                                  ("auv", "auv")])
+def test_map_with_a_prior_20_percent_off_is_not_worse_than_least_squares_on_every_vessel_kind(case):
+    """On simulated records of each vessel kind (the default training zigzags and random rudder at 1 % noise,
+    validated on the held-out turn and zigzag), MAP with the default prior (the truth moved 20 %, sd 30 %) is
+    not worse than least squares at predicting the held-out manoeuvres, averaged over three noise seeds.
+    Measured (mean NRMSE, LS / MAP): KVLCC2 0.048 / 0.017, KCS 0.023 / 0.012, USV 0.18 / 0.12, AUV 0.020 /
+    0.008. (KCS's Nomoto-1, whose derived truth is itself far from the records, is 0.903 / 0.908: equal within
+    1 %, the prior widened by the records; not asserted.)"""
+    vessel, model = case
+    ls, mp = [], []
+    for seed in range(3):
+        common = [f"vessel={vessel}", f"model={model}", f"seed={seed}"]
+        ls.append(_val_error(_run(*common, "estimator=ls")))
+        mp.append(_val_error(_run(*common, "estimator=map")))
+    assert np.isfinite(ls).all() and np.isfinite(mp).all(), (ls, mp)
+    assert np.mean(mp) <= np.mean(ls), (ls, mp)
+
+
+@pytest.mark.parametrize("vessel", ["kvlcc2", "kcs"])
+def test_a_prior_the_records_flatly_contradict_is_widened_and_map_follows_least_squares(vessel):
+    """The first-order Nomoto truth of a big hull is a linearisation (KVLCC2's T is 60,000 s, the records' 80 s);
+    a prior 20 % off it is contradicted by the records, which widen it (type-II maximum likelihood) at least
+    5 times, and MAP then predicts the held-out turn and zigzag within 2 % of least squares (measured: KVLCC2
+    0.814 against 0.807, KCS 0.902 against 0.897; the prior is never fully discarded, so not better)."""
+    common = [f"vessel={vessel}", "model=nomoto1"]
+    ls = _run(*common, "estimator=ls")
+    mp = _run(*common, "estimator=map")
+    assert mp["metrics"]["est_N_prior_widening"] > 5.0
+    assert _val_error(mp) <= 1.02 * _val_error(ls), (_val_error(mp), _val_error(ls))
+
+
 def res_ok(res) -> bool:
     return all(np.isfinite(p["estimate"]) for p in res["params"])
 

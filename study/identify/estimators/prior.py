@@ -69,7 +69,7 @@ def data_covariance(Z: np.ndarray, y: np.ndarray):
 
 
 #: the widest the records may make a prior (empirical Bayes, :func:`prior_widening`), in multiples of its stated sd
-PRIOR_SCALE_MAX = 30.0
+PRIOR_SCALE_MAX = 1e6  # effectively unbounded: records may discard a prior they flatly contradict
 
 
 def prior_widening(d: np.ndarray, V: np.ndarray, sd0: np.ndarray, top: float = PRIOR_SCALE_MAX) -> float:

@@ -627,3 +627,23 @@ def test_figures_and_ranking_render_in_chromium(browser, figures, tmp_path):
     assert browser.find_element(By.ID, "ranking").size["height"] > 0
     assert browser.execute_script("return Array.from(document.images).every(i => i.getBoundingClientRect().height > 0)")
     browser.execute_cdp_cmd("Emulation.setEmulatedMedia", {"media": ""})
+
+
+def test_identifiability_section_counts_undetermined_coefficients_and_conflicts_and_escapes_text():
+    from study.doctor.html import render_html
+
+    r = {"identifiability": [
+        {"coefficient": "Yvvv", "prior": -1.6, "estimate": -2.6, "prior_sd": 0.48, "posterior_sd": 0.37,
+         "ratio": 0.78, "moved_prior_sd": -2.1, "sentence": "Yvvv: partly determined"},
+        {"coefficient": "Nvvv", "prior": -0.03, "estimate": -0.03, "prior_sd": 0.01, "posterior_sd": 0.0099,
+         "ratio": 0.99, "moved_prior_sd": 0.0, "sentence": "Nvvv: NOT determined <b>"},
+        {"coefficient": "Nv", "prior": -0.137, "estimate": -0.14, "prior_sd": 0.04, "posterior_sd": 0.001,
+         "ratio": 0.03, "moved_prior_sd": -0.1, "sentence": "Nv: determined"}]}
+    h = render_html(r)
+    sec = h[h.index('id="identifiability"'):]
+    sec = sec[:sec.index("</section>")]
+    assert "1 of 3 anchored coefficients are not determined" in sec
+    assert "1 moved more than two prior sd" in sec
+    assert sec.count('class="undetermined"') == 2
+    assert "&lt;b&gt;" in sec and "<b>" not in sec.split("<tbody>")[1].split("</tbody>")[0].replace("<b>ratio", "")
+    assert 'id="identifiability"' not in render_html({})

@@ -797,6 +797,41 @@ def _worst(r: dict) -> str:
                     "worst")
 
 
+def _identifiability(r: dict) -> str:
+    """Per anchored coefficient of the baseline fit: prior, estimate, prior and posterior sd, their ratio and the
+    doctor's sentence; the coefficients the records do not determine, and prior-data conflicts, marked."""
+    rows = []
+    n_not, n_conf = 0, 0
+    for it in _list(r.get("identifiability")):
+        if not isinstance(it, Mapping):
+            continue
+        ratio, moved = _float(it.get("ratio")), _float(it.get("moved_prior_sd"))
+        undetermined = ratio is not None and ratio >= 0.9
+        conflict = moved is not None and abs(moved) > 2.0
+        n_not += undetermined
+        n_conf += conflict
+        cls = ' class="undetermined"' if (undetermined or conflict) else ""
+        cells = [_num(it.get("prior")), _num(it.get("estimate")), _num(it.get("prior_sd"), 3),
+                 _num(it.get("posterior_sd"), 3), _num(ratio, 2), _num(moved, 2)]
+        rows.append(f'<tr{cls}><td class="param">{_e(it.get("coefficient"))}</td>'
+                    + "".join(f'<td class="num">{c}</td>' for c in cells)
+                    + f'<td>{_e(it.get("sentence"))}</td></tr>')
+    if not rows:
+        return ""
+    lead = (f"<p>{n_not} of {len(rows)} anchored coefficients are not determined by the training records (posterior "
+            f"sd at least 0.9 of the prior's): a prediction that depends on them extrapolates the prior. "
+            f"{n_conf} moved more than two prior sd from the prior (a prior-data conflict).</p>")
+    head = ("<tr><th>Coefficient</th><th class=\"num\">Prior</th><th class=\"num\">Estimate</th>"
+            "<th class=\"num\">Prior sd</th><th class=\"num\">Posterior sd</th><th class=\"num\">Ratio</th>"
+            "<th class=\"num\">Moved (prior sd)</th><th>What it means</th></tr>")
+    foot = _defs(r, [], [("ratio", "posterior sd / prior sd: near 0 the records determine the coefficient, near 1 "
+                                   "the prior does"),
+                         ("moved", "(estimate - prior) / prior sd")])
+    return _section("Which coefficients the records determine",
+                    lead + f'<table class="params-table">\n<thead>{head}</thead>\n<tbody>\n' + "\n".join(rows)
+                    + "\n</tbody></table>" + foot, "identifiability")
+
+
 def _catalogue(r: dict) -> str:
     rows, notes = [], {}
     units = _dict(r.get("units"))
@@ -965,6 +1000,7 @@ tr.significant td:first-child { box-shadow: inset 4px 0 0 #1d6b3a; }
 tr.chosen td.effect::after { content: " \\2190 missing effect"; font-weight: normal; color: #1d6b3a;
                              font-size: .85rem; }
 tr.diverged-row td { background: #fdecee; }
+tr.undetermined td { background: #fff6e0; }
 tr.rejected td { background: repeating-linear-gradient(135deg, #fff 0, #fff 6px, #f1f1f1 6px, #f1f1f1 9px);
                  color: #555; }
 .dv { color: #b00020; font-weight: 700; text-transform: uppercase; letter-spacing: .03em; font-size: .88em; }
@@ -1045,6 +1081,7 @@ def render_html(report: Mapping | None, figures: Mapping[str, bytes] | None = No
         _safe(_ranking, r),
         _safe(_errors, r),
         _safe(_maneuvers, r),
+        _safe(_identifiability, r),
         _safe(_figures, r, figs),
         _safe(_worst, r),
         _safe(_catalogue, r),

@@ -8,8 +8,8 @@ set offset from the truth); ``identify`` passes it to ``fit(X, y, prior=...)``.
 The records enter as their least-squares estimate with its batch-means (block cluster-robust) covariance: rows
 of a manoeuvre sampled many times a second are far from independent, and counting every row as one would let any
 misfit, model error included, overrule the prior, while a short-lag HAC kernel misses the cancellation of
-differentiated noise and undervalues the records several times over (see :func:`data_covariance`). Assumption labelled: the prior's
-coefficients independent of each other.
+differentiated noise and undervalues the records several times over (see :func:`data_covariance`).
+Assumption labelled: the prior's coefficients independent of each other.
 
 What it reports per coefficient (``coef_std_``, ``coef_interval_``, ``identifiability_``): the posterior
 standard deviation, the normal 90 % interval, and the ratio of posterior to prior standard deviation: near 0

@@ -128,7 +128,8 @@ def res_ok(res) -> bool:
 
 def test_emcee_under_the_prior_agrees_with_the_map_estimate():
     """emcee samples the same posterior the MAP estimator approximates (Gaussian prior, block-robust data
-    covariance): the posterior medians agree with the MAP estimates to a fraction of a posterior sd on the AUV's yaw equation."""
+    covariance): the posterior medians agree with the MAP estimates to a fraction of a posterior sd on the
+    AUV's yaw equation."""
     common = ["case=auv", "maneuvers.validate=[]"]
     m = pd.DataFrame(_run("estimator=map", "estimator.params.prior.source=offset", *common)["params"])
     e = pd.DataFrame(_run("estimator=emcee", "estimator.params.target_ess=400",

@@ -30,7 +30,7 @@ def _is_real(path: Path) -> bool:
 
 
 def load_records(spec, states: str = "measured", state_options: dict | None = None) -> list:
-    """Records from a file, folder or glob: schema files, or the real datasets' own formats. ``states``
+    """Records from a file, folder or glob, or a comma-separated list of them: schema files, or the real datasets' own formats. ``states``
     (``measured | auto | ekf``) and ``state_options``: where u, v, r come from (``study.schema.read_record``;
     the real datasets' loaders always give u, v, r, which ``ekf`` refines)."""
     from .loaders import load_real
@@ -39,15 +39,20 @@ def load_records(spec, states: str = "measured", state_options: dict | None = No
     if states not in STATES:
         raise ValueError(f"states={states}: expected one of {list(STATES)}")
 
-    p = Path(str(spec)).expanduser()
-    if p.is_file():
-        files = [p]
-    elif p.is_dir():
-        files = sorted(f for f in p.iterdir() if f.suffix.lower() in SUPPORTED + (".dat",))
-    else:
-        files = sorted(Path(f) for f in globmod.glob(str(spec)) if Path(f).suffix.lower() in SUPPORTED + (".dat",))
-    if not files:
-        raise FileNotFoundError(f"{spec}: no record files (.csv, .parquet, .dat) found")
+    from .records_run import patterns
+
+    files = []
+    for pattern in patterns(spec):  # a comma-separated list, as ``python -m study train=...`` takes
+        p = Path(pattern).expanduser()
+        if p.is_file():
+            found = [p]
+        elif p.is_dir():
+            found = sorted(f for f in p.iterdir() if f.suffix.lower() in SUPPORTED + (".dat",))
+        else:
+            found = sorted(Path(f) for f in globmod.glob(pattern) if Path(f).suffix.lower() in SUPPORTED + (".dat",))
+        if not found:
+            raise FileNotFoundError(f"{pattern}: no record files (.csv, .parquet, .dat) found")
+        files += [f for f in found if f not in files]
     out = []
     for f in files:
         if _is_real(f):

@@ -183,6 +183,21 @@ def test_bad_input_is_a_clear_error(tmp_path):
         Doctor(VESSEL, read_config("model", "nomoto1"), *records([]))
 
 
+def test_the_doctor_reads_a_comma_separated_list_of_patterns(tmp_path):
+    """train=<glob>,<glob> as ``python -m study`` takes it; a pattern that matches nothing is named."""
+    from study.diagnose import load_records
+    from study.schema import Record, write_record
+
+    df = simulate(load_vessel(VESSEL), "zigzag_10_10", duration=30.0)
+    for sub in ("a", "b"):
+        (tmp_path / sub).mkdir()
+        write_record(Record(data=df, meta={"name": sub}), tmp_path / sub / f"{sub}.csv")
+    recs = load_records(f"{tmp_path}/a/*.csv, {tmp_path}/b")
+    assert [r.meta["name"] for r in recs] == ["a", "b"]
+    with pytest.raises(FileNotFoundError, match="nothing_here"):
+        load_records(f"{tmp_path}/a/*.csv,{tmp_path}/nothing_here/*.csv")
+
+
 def test_cli_on_simulated_files_names_the_hidden_current(tmp_path):
     """The README's example: records made by python -m study.simulate with a hidden current; the doctor names
     it, writes report.html/json and its figures, logs its ladder in the results table, and keeps an existing

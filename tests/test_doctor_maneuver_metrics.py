@@ -196,3 +196,38 @@ def test_the_html_table_shows_names_units_and_na():
     D = table(rows)["tactical_diameter"]["measured"]
     assert f">{D:.4g}<" in page and ">nan<" not in page.lower()
     assert "No turning circle or zigzag" in metrics_table_html([])
+
+
+def test_the_doctor_replays_a_record_with_an_approach_from_the_manoeuvre_start():
+    """study.doctor.diagnose.manoeuvre_predictions: the replay the metrics compare starts where the manoeuvre
+    does (from the measured state there), not at the start of the approach; a record taken whole keeps its
+    whole-record replay."""
+    from types import SimpleNamespace
+
+    from study.doctor.diagnose import manoeuvre_predictions
+    from study.doctor.maneuver_metrics import manoeuvre_start
+
+    v = load_vessel(VESSEL)
+    t = np.arange(0.0, 160.0, 0.1)
+    steer = np.repeat(np.random.default_rng(3).uniform(-12, 12, 8), 50)
+    delta = np.radians(np.where(t < 40.0, np.concatenate([steer, np.zeros(len(t))])[:len(t)], 35.0))
+    out = replay(v, t, delta, np.full(len(t), v.n0), [v.U0, 0, 0, 0, 0, 0])[:, :, 0]
+    approach = pd.DataFrame({"time": t, "u": out[:, 0], "v": out[:, 1], "r": out[:, 2], "x0": out[:, 3],
+                             "y0": out[:, 4], "psi": out[:, 5], "delta": out[:, 6], "n": v.n0})
+    whole = measured("turning_35")
+    seen = {}
+
+    def predict(fit, df, info):
+        seen[info] = df
+        return replayed(VESSEL, df)
+
+    doctor = SimpleNamespace(mode="given", val_names=["approach", "whole"], val_df=[approach, whole],
+                             val_infos=["approach", "whole"], problem=SimpleNamespace(predict=predict))
+    got = manoeuvre_predictions(doctor, SimpleNamespace(fit="fit"), {"approach": "old", "whole": "kept"})
+    t0 = manoeuvre_start(approach)
+    assert 30.0 < t0 < 40.5
+    assert seen["approach"]["time"].iloc[0] == pytest.approx(t0, abs=0.11)
+    assert seen["approach"]["u"].iloc[0] == pytest.approx(approach.loc[approach["time"] >= t0 - 1e-9, "u"].iloc[0])
+    assert "whole" not in seen and got["whole"] == "kept"
+    rows = table(maneuver_metrics("approach", approach, got["approach"], None, L))
+    assert rows["tactical_diameter"]["baseline"] == pytest.approx(rows["tactical_diameter"]["measured"], rel=0.02)

@@ -494,6 +494,27 @@ def predictions(doctor: "Doctor", ev: Evaluation) -> dict:
     return out
 
 
+def manoeuvre_predictions(doctor: "Doctor", ev: Evaluation, whole: dict) -> dict:
+    """The replays the manoeuvre metrics compare: a record whose manoeuvre starts after an approach
+    (``maneuver_metrics.manoeuvre_start``) replayed from the measured state at that start; any other record's
+    whole-record replay (``whole``, from :func:`predictions`)."""
+    from .maneuver_metrics import manoeuvre_start
+
+    out = dict(whole)
+    if doctor.mode == "given":
+        items = [(n, df, info, doctor.problem, ev.fit) for n, df, info in
+                 zip(doctor.val_names, doctor.val_df, doctor.val_infos)]
+    else:
+        items = [(n, df, doctor.problem.infos[i], doctor.folds[i], ev.fold_fits[i] if ev.fold_fits else None)
+                 for i, (n, df) in enumerate(zip(doctor.train_names, doctor.train_df))]
+    for name, df, info, problem, fit in items:
+        t0 = manoeuvre_start(df)
+        if t0 is not None and fit is not None:
+            cut = df[df["time"] >= t0 - 1e-9].reset_index(drop=True)
+            out[name] = problem.predict(fit, cut, info) if len(cut) >= 10 else None
+    return out
+
+
 def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: bool = False) -> dict:
     """Write ``report.json``, ``report.html`` and the figures (``figures/*.png``) into ``out_dir``; returns the
     report. Refuses to replace an existing report unless ``overwrite``."""
@@ -556,8 +577,9 @@ def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: 
     from .maneuver_metrics import maneuver_metrics
 
     mm = []
+    mb, mf = manoeuvre_predictions(doctor, base, pb), manoeuvre_predictions(doctor, final, pf)
     for name, df in meas.items():
-        mm += maneuver_metrics(name, df, pb.get(name), pf.get(name), doctor.problem.L)
+        mm += maneuver_metrics(name, df, mb.get(name), mf.get(name), doctor.problem.L)
     for name, data in figs.items():
         (out / "figures" / name).write_bytes(data)
     html_report = {**_jsonable(rep), "title": f"Model doctor: {model} on {vessel}", "created_by":

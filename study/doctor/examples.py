@@ -1,14 +1,16 @@
-"""``python -m study.doctor.examples``: the doctor's four worked examples, rebuilt into ``paper_figs/doctor/``.
+"""``python -m study.doctor.examples``: the doctor's five worked examples, rebuilt into ``paper_figs/doctor/``.
 
 1. ``simulated_current``: the README's example -- five records of the 7 m KVLCC2 made by ``python -m
    study.simulate`` with a hidden current (10 % of the speed towards the north-east), 1 % noise; the model is the
    vessel's own (``known``).
-2. ``esso_osaka``: the Esso Osaka 3 m model's free-running zigzags (training) and the October turning circles
-   (validation), Osaka University's pond, with its measured wind; the model is ``esso_osaka`` (its particulars
-   with KVLCC2's MMG coefficients as a labelled stand-in: no coefficients of the Esso Osaka are published).
-3. ``kvlcc2_hsva``: HSVA's free-running KVLCC2 zigzags, the 5 deg and 1 deg switch-heading ones for training,
+2. ``esso_osaka``: the Esso Osaka 3 m model's free-running zigzags (training) and its 14 turning circles
+   (validation), Osaka University's pond, with its measured wind; the model is ``esso_osaka`` as configured (its
+   empirical hull from the main particulars, KVLCC2's interaction coefficients as a labelled stand-in).
+3. ``esso_osaka_identified``: the hull identified from the zigzags and the random-rudder runs, anchored to that
+   empirical hull, validated on the same 14 turns.
+4. ``kvlcc2_hsva``: HSVA's free-running KVLCC2 zigzags, the 5 deg and 1 deg switch-heading ones for training,
    the 10/10 and 20/10 ones (both sides) for validation; the model is ``kvlcc2_l7``, the published MMG set.
-4. ``kvlcc2_hsva_identified``: the same records, the MMG hull identified from them (anchored to the published
+5. ``kvlcc2_hsva_identified``: the same records, the MMG hull identified from them (anchored to the published
    set): the user's normal case.
 
 Each writes ``paper_figs/doctor/<example>/`` (report.html, report.json, figures/) and the summary
@@ -60,8 +62,20 @@ def esso_osaka() -> dict:
     from ..loaders import real_data_dir
 
     d = real_data_dir() / "esso_osaka_frt" / "data"
-    return run(_conf(vessel="esso_osaka", train=f"{d}/zigzag/*.csv", validate=f"{d}/turning/turn_14-Oct*.csv",
+    return run(_conf(vessel="esso_osaka", train=f"{d}/zigzag/*.csv", validate=f"{d}/turning/*.csv",
                      out=str(OUT / "esso_osaka")))
+
+
+def esso_osaka_identified() -> dict:
+    """Esso Osaka's MMG hull identified from its zigzags and random-rudder runs (the data papers' training
+    set), anchored to its empirical prior (the config's hull), validated on all 14 measured turning circles: a
+    turn from zigzags, on real records."""
+    from ..diagnose import run
+    from ..loaders import real_data_dir
+
+    d = real_data_dir() / "esso_osaka_frt" / "data"
+    return run(_conf(vessel="esso_osaka", model="mmg_hull", train=f"{d}/zigzag/*.csv,{d}/random/*.csv",
+                     validate=f"{d}/turning/*.csv", out=str(OUT / "esso_osaka_identified")))
 
 
 def kvlcc2_hsva() -> dict:
@@ -84,6 +98,29 @@ def kvlcc2_hsva_identified() -> dict:
                      validate=f"{d}/HSVA_CPMC_KVLCC2_Z_*_10_?.dat", out=str(OUT / "kvlcc2_hsva_identified")))
 
 
+def _turns(rep: dict) -> list:
+    """The validation turning circles' tactical diameters (report.json ``maneuver_metrics``): measured, the
+    baseline model's and the final model's replays, and the mean relative error of each over the turns both
+    replays complete."""
+    rows = [m for m in rep.get("maneuver_metrics", []) if m["metric"] == "tactical_diameter_L"]
+    ok = lambda x: x is not None and x == x and abs(x) != float("inf")
+    if not rows:
+        return []
+    out = ["", "| turning circle | measured TD [L] | baseline | final |", "|---|---|---|---|"]
+    errs = {"baseline": [], "final": []}
+    for m in rows:
+        cells = [f"{m[k]:.2f}" if ok(m[k]) else "-" for k in ("measured", "baseline", "final")]
+        out.append(f"| {m['record']} | " + " | ".join(cells) + " |")
+        if ok(m["measured"]) and ok(m["baseline"]) and ok(m["final"]):
+            for k in errs:
+                errs[k].append(abs(m[k] / m["measured"] - 1))
+    if errs["baseline"]:
+        n = len(errs["baseline"])
+        out += ["", f"Mean |TD error| over the {n} turns both replays complete: baseline "
+                    f"{100 * sum(errs['baseline']) / n:.0f} %, final {100 * sum(errs['final']) / n:.0f} %."]
+    return out
+
+
 def _summary(name: str, rep: dict) -> list:
     lines = [f"### {name}", "", f"**{rep['verdict']}**", "", "| step | validation error |", "|---|---|"]
     def num(x, pct=False):
@@ -103,6 +140,7 @@ def _summary(name: str, rep: dict) -> list:
                      f"{'yes' if c['significant'] else 'no'} | {pars} |")
     if rep.get("notes"):
         lines += [""] + [f"- {n}" for n in rep["notes"]]
+    lines += _turns(rep)
     lines += ["", f"Report: [`{name}/report.html`]({name}/report.html); figures in `{name}/figures/`.", ""]
     return lines
 
@@ -117,7 +155,8 @@ def main() -> int:
              "`../shared/data/real`, never copied here.", ""]
     with tempfile.TemporaryDirectory() as tmp:
         for name, fn in (("simulated_current", lambda: simulated_current(Path(tmp))), ("esso_osaka", esso_osaka),
-                         ("kvlcc2_hsva", kvlcc2_hsva), ("kvlcc2_hsva_identified", kvlcc2_hsva_identified)):
+                         ("esso_osaka_identified", esso_osaka_identified), ("kvlcc2_hsva", kvlcc2_hsva),
+                         ("kvlcc2_hsva_identified", kvlcc2_hsva_identified)):
             try:
                 rep = fn()
             except FileNotFoundError as e:

@@ -684,7 +684,8 @@ def _maneuvers(r: dict) -> str:
     same = isinstance(fin, list) and isinstance(base_eff, list) and sorted(map(str, fin)) == sorted(map(str, base_eff))
     intro = ('<p class="legend">Standard manoeuvre metrics (IMO MSC.137(76), MSC/Circ.1053, ITTC 7.5-04-02-01) of '
              'each validation record that is a turning circle or a zigzag, on the measured record and on the '
-             'replays of the baseline and of the final model (open loop, the measured rudder). n/a: the record '
+             'replays of the baseline and of the final model (open loop, the measured rudder; a record with an '
+             'approach before its manoeuvre is cut there and replayed from its measured state). n/a: the record '
              'cannot carry the metric.' + (' No effect was added: the final model is the baseline.' if same else '')
              + '</p>')
     foot = desc + _defs(r, ["diverged"] if (bdiv or fdiv) else [])

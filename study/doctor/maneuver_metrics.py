@@ -21,7 +21,10 @@ Choices made here:
   the execution of :mod:`study.metrics` (the first rudder movement) would fall, so that ``detect_maneuver``
   calls it "other", or a turning circle with its origin in the approach. When the test finds a turning circle
   or a zigzag, the three records are cut at the start of the rudder movement into it (keeping the quiet rudder
-  just before it) before the metrics; a clean simulated record is not cut. A record the test rejects and
+  just before it) before the metrics, and the doctor's two replays for them start there, from the measured state
+  (:func:`manoeuvre_start`): replayed from the start of the record, a model arrives at the execution with the
+  approach's accumulated errors (an Esso Osaka run starts at rest, where an MMG model is not meant to work), and
+  the metrics would compare the approach, not the manoeuvre. A clean simulated record is not cut. A record the test rejects and
   ``detect_maneuver`` calls a turning circle is taken whole; anything else gives no rows.
 - *Overshoots of a replay* are measured from the **measured** record's switch heading (the heading change at
   its first rudder reversal; their own when the measured record has none): the replay reverses its rudder when
@@ -183,6 +186,13 @@ def _kind(measured) -> tuple[str, float | None]:
     if kind in ("turning", "zigzag"):
         return kind, t0
     return ("turning", None) if k0 == "turning" else ("other", None)
+
+
+def manoeuvre_start(measured) -> float | None:
+    """The time a measured record's manoeuvre starts (where :func:`maneuver_metrics` cuts the records), None
+    when it is taken whole. The doctor replays a cut record from its measured state there (see
+    ``study.doctor.diagnose.manoeuvre_predictions``)."""
+    return _kind(measured)[1]
 
 
 # ---------------------------------------------------------------------------------------------- the metrics

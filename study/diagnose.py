@@ -30,9 +30,9 @@ def _is_real(path: Path) -> bool:
 
 
 def load_records(spec, states: str = "measured", state_options: dict | None = None) -> list:
-    """Records from a file, folder or glob, or a comma-separated list of them: schema files, or the real datasets' own formats. ``states``
-    (``measured | auto | ekf``) and ``state_options``: where u, v, r come from (``study.schema.read_record``;
-    the real datasets' loaders always give u, v, r, which ``ekf`` refines)."""
+    """Records from a file, folder or glob, or a comma-separated list of them: schema files, or the real
+    datasets' own formats. ``states`` (``measured | auto | ekf``) and ``state_options``: where u, v, r come from
+    (``study.schema.read_record``; the real datasets' loaders always give u, v, r, which ``ekf`` refines)."""
     from .loaders import load_real
     from .schema import STATES, SUPPORTED, read_record, with_estimated_states
 

@@ -577,7 +577,8 @@ def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: 
     from .maneuver_metrics import maneuver_metrics
 
     mm = []
-    mb, mf = manoeuvre_predictions(doctor, base, pb), manoeuvre_predictions(doctor, final, pf)
+    mb = manoeuvre_predictions(doctor, base, pb)
+    mf = mb if final is base else manoeuvre_predictions(doctor, final, pf)  # no effect added: the same replays
     for name, df in meas.items():
         mm += maneuver_metrics(name, df, mb.get(name), mf.get(name), doctor.problem.L)
     for name, data in figs.items():

@@ -444,6 +444,28 @@ class DoctorProblem:
         lam[anchored] = (self._tau * self._m_base / m) / sd ** 2
         return theta0, lam
 
+    def posterior(self, fit: Fit) -> dict | None:
+        """The Gaussian posterior of a fit's linear unknowns (free model coefficients and the effects' linear
+        parameters) with the effects' nonlinear parameters held at their estimates: ``{'names', 'mean', 'cov',
+        'tau', 'prior'}``. The covariance is that of the normal equations ``solve`` uses (anchored when the
+        problem is), with the data weight of ``_noise_per_row`` (the effective number of independent rows); an
+        unanchored fit gets the same data weight and no prior. None when nothing is free."""
+        y, Phi, names = self.rows(fit.effects, fit.outer, model=True)
+        if not names:
+            return None
+        prior = self._prior(names, len(y)) if self.anchor else None
+        if self._tau is None:
+            self._tau = self._noise_per_row()
+        w2 = 1.0 / self.reference()
+        G = sum(w2[k] * (Phi[:, k, :].T @ Phi[:, k, :]) for k in range(3))
+        tau = self._tau * self._m_base / len(y)  # the objective's scale of one unit of -2 log posterior
+        A = (G + (np.diag(prior[1]) if prior is not None else 0.0)) / tau
+        s = np.sqrt(np.diag(A))
+        s[~(s > 0)] = 1.0
+        cov = np.linalg.pinv(A / np.outer(s, s), hermitian=True) / np.outer(s, s)
+        mean = np.array([float(fit.coefs.get(n, 0.0)) for n in names])
+        return {"names": list(names), "mean": mean, "cov": cov, "tau": tau, "prior": prior}
+
     def identifiability(self, fit: Fit) -> list[dict]:
         """Per anchored model coefficient of a fit: prior, estimate, posterior and prior standard deviation and
         their ratio (near 0: the records determine it; near 1: the prior does), with a plain sentence. The
@@ -451,18 +473,11 @@ class DoctorProblem:
         effects' nonlinear parameters held at their estimates. Empty when the model is not anchored."""
         if not self.anchor or not self.model_free:
             return []
-        y, Phi, names = self.rows(fit.effects, fit.outer, model=True)
-        prior = self._prior(names, len(y))
-        if prior is None:
+        post = self.posterior(fit)
+        if post is None or post["prior"] is None:
             return []
-        w2 = 1.0 / self.reference()
-        G = sum(w2[k] * (Phi[:, k, :].T @ Phi[:, k, :]) for k in range(3))
-        theta0, lam = prior
-        tau = self._tau * self._m_base / len(y)  # the objective's scale of one unit of -2 log posterior
-        A = (G + np.diag(lam)) / tau
-        s = np.sqrt(np.diag(A))
-        s[~(s > 0)] = 1.0
-        cov = np.linalg.pinv(A / np.outer(s, s), hermitian=True) / np.outer(s, s)
+        names, cov, tau = post["names"], post["cov"], post["tau"]
+        theta0, lam = post["prior"]
         out = []
         for j, n in enumerate(names):
             if not lam[j] > 0:

@@ -1,8 +1,11 @@
 """CI runs the ``smoke`` study and rebuilds the figures from its table: every estimator on a regression
 structure and on output error lands in the table (regression estimators skipped on output error, with the
 reason); ``python -m study.figures`` rebuilds the outputs twice, byte for byte the same, with CLAIMS.md and a
-README listing each output. (A killed sweep resuming without recomputing: tests/test_app.py.)"""
+README listing each output. A rebuild from a table holding one study leaves every other study's outputs and rows
+as they were. (A killed sweep resuming without recomputing: tests/test_app.py.)"""
 import filecmp
+import json
+import shutil
 import os
 import subprocess
 import sys
@@ -74,3 +77,56 @@ def test_figures_without_a_table_is_a_clear_error(tmp_path):
     p = subprocess.run([sys.executable, "-m", "study.figures", "--results", str(tmp_path / "nothing"), "--out",
                         str(tmp_path / "figs")], capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and "no results table" in p.stderr
+
+
+def _snapshot(root: Path) -> dict:
+    return {str(f.relative_to(root)): f.read_bytes() for f in root.rglob("*") if f.is_file()}
+
+
+def test_rebuilding_one_study_leaves_every_other_study_untouched(smoke, tmp_path):
+    """The committed paper_figs/ rebuilt from a table that holds only the smoke study: every file of every other
+    study is byte-identical, their CLAIMS.md and README.md rows stay, the smoke study's stale files go."""
+    _, results, _ = smoke
+    out = tmp_path / "paper_figs"
+    shutil.copytree(REPO / "paper_figs", out)
+    (out / "smoke" / "stale_figure.png").write_bytes(b"not written by this rebuild")
+    before = _snapshot(out)
+    others = {k: v for k, v in before.items() if "/" in k and not k.startswith("smoke/")}
+    assert len({k.split("/")[0] for k in others}) >= 6  # the seed studies, emcee_kt, grand, the doctor
+    p = subprocess.run([sys.executable, "-m", "study.figures", "--results", str(results), "--out", str(out)],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-3000:]
+    after = _snapshot(out)
+    assert {k: after.get(k) for k in others} == others
+    assert "smoke/stale_figure.png" not in after and "smoke/fit_time.png" in after
+    idx = json.loads(after["smoke/index.json"])
+    assert idx["study"] == "smoke" and idx["runs"] > 0 and idx["claim"] is None
+    assert after["CLAIMS.md"] == before["CLAIMS.md"]  # smoke makes no claim: every row stays as it was
+    readme_before = [ln for ln in before["README.md"].decode().splitlines() if ln.startswith("| `")
+                     and "| smoke" not in ln]
+    readme_after = after["README.md"].decode().splitlines()
+    assert all(ln in readme_after for ln in readme_before)
+    assert "not run" not in after["CLAIMS.md"].decode()
+
+
+def test_a_study_module_without_name_and_build_is_refused(tmp_path, monkeypatch):
+    import importlib
+
+    from study.studies import discover
+
+    pkg = tmp_path / "fake_studies"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("")
+    (pkg / "half_written.py").write_text("x = 1\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    with pytest.raises(ImportError, match="half_written.py: a study module needs NAME = 'half_written'"):
+        discover(importlib.import_module("fake_studies"))
+
+
+def test_every_study_module_has_its_experiment_and_every_experiment_with_a_study_its_module():
+    from study.studies import discover
+
+    found = discover()
+    conf = REPO / "conf" / "experiment"
+    named = {f.stem for f in conf.glob("*.yaml") if "\nstudy: " in "\n" + f.read_text()}
+    assert set(found) == named, (sorted(found), sorted(named))

@@ -101,7 +101,6 @@ def kvlcc2_hsva_table(data_dir=None, draws: int = 64) -> pd.DataFrame:
     """The published KVLCC2 set against hulls identified from HSVA's nine 1-5 deg switch zigzags (the doctor's
     training records in ``study.doctor.examples``), each turned at 35 deg from HSVA's approach speed at its own
     self-propulsion rpm and at HSVA's measured rpm."""
-    from ..app import CONF_DIR  # noqa: F401  (the package's conf/ must be importable)
     from ..diagnose import load_records
     from ..loaders import real_data_dir
     from .effects import list_effects, registry

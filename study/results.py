@@ -20,8 +20,9 @@ hostname, threads, ...), ``cfg_*`` (configuration flattened with dotted keys, li
 ``m_*`` (metrics), ``t_*`` (timings [s]).
 
 params.parquet columns: ``run_id``, ``equation``, ``name``, ``estimate``, ``truth``, ``rel_error``,
-``abs_error``, ``ci_low``, ``ci_high``, ``std`` and the copied config columns of
-:data:`PARAM_CONFIG_COLUMNS` that exist.
+``abs_error``, the optional numbers of :data:`PARAM_OPTIONAL` (``ci_low``, ``ci_high``, ``std``, ``vif``,
+``selected``, ``prior_mean``, ``prior_sd``, ``identifiability``, ``term_scale``, ``scaled_error``; NaN where a run
+has none), ``truth_kind`` and the copied config columns of :data:`PARAM_CONFIG_COLUMNS` that exist.
 
 CLI: ``python -m study.results rebuild [--root results]`` and ``python -m study.results show [--root results]``.
 """
@@ -66,7 +67,11 @@ REQUIRED_FIELDS = ("run_id", "status", "config", "metrics", "params", "timings",
 
 #: Keys every entry of ``params`` must have; the optional ones default to None.
 PARAM_REQUIRED = ("equation", "name", "estimate", "truth")
-PARAM_OPTIONAL = ("ci_low", "ci_high", "std", "vif", "selected")
+PARAM_OPTIONAL = ("ci_low", "ci_high", "std", "vif", "selected",
+                  # prior-anchored fits (estimator map, emcee with a prior): the prior and posterior sd / prior sd
+                  "prior_mean", "prior_sd", "identifiability",
+                  # the term's share of its equation and the error scaled by it (study.identify.fit.term_scales)
+                  "term_scale", "scaled_error")
 #: Optional text keys of a params entry: how the truth was obtained ('exact', 'approximate', 'derived', ...).
 PARAM_TEXT = ("truth_kind",)
 

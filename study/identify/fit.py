@@ -109,6 +109,31 @@ class Prepared:
     collinearity: dict
 
 
+def term_scales(model, records) -> dict:
+    """Each model term's weight in its equation: the RMS of the term's regressor over the RMS of the equation's
+    left-hand side, on central-difference rows of the training records. The same rows serve every structure and
+    estimator of a dataset, so scaled errors of two structures compare. ``|estimate - truth| * scale`` is the
+    error's contribution to the equation in units of the equation's own size: a coefficient near zero whose term
+    hardly acts no longer dominates a median of relative errors, and a zero truth gets a finite figure. Empty for
+    models whose reported parameters are not regression columns (Nomoto's K, T, ...) or rows that cannot be made."""
+    if getattr(model, "type", None) == "nomoto":
+        return {}
+    from .structures import make_structure
+
+    try:
+        rows = regression_rows(model, make_structure({"name": "central", "clean": {}, "split": {}}), records)
+    except (ValueError, KeyError):
+        return {}
+    out = {}
+    for eq, (Phi, y, _) in rows.items():
+        ry = float(np.sqrt(np.mean(np.square(y)))) if len(y) else 0.0
+        if not ry > 0:
+            continue
+        for j, n in enumerate(model.equations[eq]):
+            out[n] = float(np.sqrt(np.mean(np.square(Phi[:, j])))) / ry
+    return out
+
+
 def prepare(model, structure, records, candidates: int | None = None, seed: int = 0) -> dict:
     """Per equation the :class:`Prepared` regression of ``model`` on ``records`` with ``structure``."""
     rows = regression_rows(model, structure, records, candidates=candidates)
@@ -228,18 +253,31 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
             phys_samples = model.physical(samples) if samples else {}
             coef_rows = [("N", n, physical[n], _sample_intervals(phys_samples.get(n)))
                          for n in model.physical_names["N"]]
-    # parameter rows with truth and drift
+    # parameter rows with truth and drift; each error also scaled by its term's weight in the equation
+    scales = term_scales(model, records) if truth else {}
     params = []
     for eq, n, v, extra in coef_rows:
         t = truth.get(n)
         kind = truth_kind if n in truth else "candidate (not in the truth model)"
-        params.append({"equation": eq, "name": n, "estimate": _num(v), "truth": _num(t if t is not None else 0.0),
-                       "truth_kind": kind, **{k: _num(x) for k, x in extra.items()}})
+        row = {"equation": eq, "name": n, "estimate": _num(v), "truth": _num(t if t is not None else 0.0),
+               "truth_kind": kind, **{k: _num(x) for k, x in extra.items()}}
+        if n in scales and n in truth and row["estimate"] is not None:
+            row["term_scale"] = _num(scales[n])
+            row["scaled_error"] = _num(abs(row["estimate"] - row["truth"]) * scales[n])
+        params.append(row)
     rel = [abs(p["estimate"] - p["truth"]) / abs(p["truth"]) for p in params
            if p["truth"] and p["name"] in truth and p["estimate"] is not None]
     metrics["drift_median"] = float(np.median(rel)) if rel else float("nan")
     metrics["drift_max"] = float(np.max(rel)) if rel else float("nan")
     metrics["drift_mean"] = float(np.mean(rel)) if rel else float("nan")
+    for eq in sorted({p["equation"] for p in params}):  # per equation: never pooled across equations in a claim
+        rq = [abs(p["estimate"] - p["truth"]) / abs(p["truth"]) for p in params if p["equation"] == eq
+              and p["truth"] and p["name"] in truth and p["estimate"] is not None]
+        sq = [p["scaled_error"] for p in params if p["equation"] == eq and p.get("scaled_error") is not None]
+        metrics[f"drift_median_{eq}"] = float(np.median(rq)) if rq else float("nan")
+        if sq:
+            metrics[f"scaled_drift_median_{eq}"] = float(np.median(sq))
+            metrics[f"scaled_drift_max_{eq}"] = float(np.max(sq))
     metrics["truth_exact"] = float(bool(exact))
     metrics["n_params"] = len([p for p in params if p["name"] in truth])
     estimates = {p["name"]: p["estimate"] for p in params if p["name"] in truth}

@@ -1,0 +1,51 @@
+"""Metrics that mean what they say (issue 11): each coefficient's error scaled by its term's weight in the
+equation, per-equation drift metrics, and the prior and identifiability columns of a prior-anchored fit, all in
+the results table itself (not only in the run's record)."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pandas as pd
+import pytest
+
+
+def _table(tmp_path, *overrides) -> tuple[pd.DataFrame, pd.DataFrame]:
+    res = tmp_path / "results"
+    p = subprocess.run([sys.executable, "-m", "study", "experiment=tiny", "progress=false", *overrides],
+                       cwd=tmp_path, env=dict(os.environ, STUDY_RESULTS_DIR=str(res), OPENBLAS_NUM_THREADS="1"),
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-3000:]
+    runs, params = pd.read_parquet(res / "runs.parquet"), pd.read_parquet(res / "params.parquet")
+    assert (runs["status"] == "ok").all(), runs["error"].tolist()
+    return runs, params
+
+
+def test_scaled_error_is_the_error_times_the_terms_weight_and_tames_near_zero_truths(tmp_path):
+    runs, p = _table(tmp_path, "vessel=mariner", "model=abkowitz")
+    q = p[p["truth_kind"] == "exact"]
+    assert len(q) == len(p) and q["term_scale"].notna().all() and (q["term_scale"] > 0).all()
+    np.testing.assert_allclose(q["scaled_error"], (q["estimate"] - q["truth"]).abs() * q["term_scale"], rtol=1e-12)
+    # the Abkowitz Mariner has many near-zero coefficients whose terms hardly act: relative errors of 100 % and
+    # more while each error moves its equation by a few % of the equation's own size
+    assert q["rel_error"].abs().median() > 0.3
+    assert q["scaled_error"].median() < 0.1 * q["rel_error"].abs().median()
+    for eq in ("X", "Y", "N"):
+        assert runs[f"m_scaled_drift_median_{eq}"].iloc[0] == pytest.approx(q.loc[q.equation == eq,
+                                                                                  "scaled_error"].median())
+        assert np.isfinite(runs[f"m_drift_median_{eq}"].iloc[0])
+
+
+def test_nomoto_parameters_have_no_term_scale(tmp_path):
+    """K, T, ... are not regression columns: no scaled error is made up for them."""
+    _, p = _table(tmp_path, "vessel=kt1_mariner", "model=nomoto1")
+    assert len(p) and p["scaled_error"].isna().all() and p["rel_error"].notna().all()
+
+
+def test_prior_columns_reach_the_params_table(tmp_path):
+    _, p = _table(tmp_path, "estimator=map")
+    assert {"prior_mean", "prior_sd", "identifiability"} <= set(p.columns)
+    assert p["prior_mean"].notna().all() and (p["prior_sd"] > 0).all()
+    assert ((p["identifiability"] > 0) & (p["identifiability"] <= 1.0 + 1e-9)).all()

@@ -57,10 +57,38 @@ def _level(x):
     return {k: float(v) for k, v in x.items()} if isinstance(x, dict) else float(x or 0.0)
 
 
-def measurement(conf: dict, seed: int) -> MeasurementModel:
+def time_scale(vessel) -> float | None:
+    """The ship's own time scale L/U0 [s] (the time it takes to travel its length), or None without a length."""
+    L = ((getattr(vessel, "cfg", None) or {}).get("particulars") or {}).get("Lpp")
+    U = float(getattr(vessel, "U0", 0.0) or 0.0)
+    return float(L) / U if L and U > 0 else None
+
+
+def sample_interval(conf: dict, vessel=None) -> float | None:
+    """The records' sampling interval [s]: ``noise.sample_dt`` (seconds) or ``noise.sample_dt_LU`` (in the ship's
+    time scale L/U0, so studies of ships of different size and speed sample alike), rounded to a whole multiple of
+    the simulation step (records are decimated from the simulation, never interpolated between its steps). None:
+    every step. Both given, or a value that is not positive, is an error naming the setting."""
+    nz = conf.get("noise") or {}
+    dt_s, dt_lu = nz.get("sample_dt"), nz.get("sample_dt_LU")
+    if dt_s is not None and dt_lu is not None:
+        raise ValueError(f"noise.sample_dt={dt_s} and noise.sample_dt_LU={dt_lu}: give one of them")
+    if dt_lu is None:
+        return None if dt_s is None else float(dt_s)
+    if not float(dt_lu) > 0:
+        raise ValueError(f"noise.sample_dt_LU={dt_lu}: expected a positive interval in units of L/U0")
+    T = time_scale(vessel) if vessel is not None else None
+    if T is None:
+        raise ValueError(f"noise.sample_dt_LU={dt_lu}: vessel '{getattr(vessel, 'name', '?')}' has no length and "
+                         f"speed (particulars.Lpp, operation.U0) to scale it; give noise.sample_dt in seconds")
+    step = float((conf.get("sim") or {}).get("dt") or default_dt(vessel))
+    return step * max(1, round(float(dt_lu) * T / step))
+
+
+def measurement(conf: dict, seed: int, vessel=None) -> MeasurementModel:
     nz = dict(conf.get("noise") or {})
     return MeasurementModel(
-        dt=nz.get("sample_dt"), noise_level=_level(nz.get("level", 0.0)), bias=nz.get("bias") or {},
+        dt=sample_interval(conf, vessel), noise_level=_level(nz.get("level", 0.0)), bias=nz.get("bias") or {},
         colored=nz.get("colored"), outliers=nz.get("outliers"), dropouts=nz.get("dropouts"), seed=seed,
     )
 
@@ -207,8 +235,13 @@ def run_study(conf: dict, data=None) -> dict:
     t0 = time.perf_counter()
     records = []
     for i, (name, df) in enumerate(clean_train.items()):
-        records.append(measurement(conf, seed=seed * 7919 + i).apply(df))
+        records.append(measurement(conf, seed=seed * 7919 + i, vessel=truth).apply(df))
     timings["measure"] = time.perf_counter() - t0
+    # the sampling interval in seconds and in the ship's time scale: every run says how coarsely it was sampled
+    step = float((conf.get("sim") or {}).get("dt") or default_dt(truth))
+    sample_dt = sample_interval(conf, truth) or step
+    T_ship = time_scale(truth)
+    sampling = {"sample_dt": sample_dt, "sample_dt_LU": sample_dt / T_ship if T_ship else float("nan")}
 
     if (conf["model"].get("effects") or []):
         # a model with effects (model.effects=[current, ...]): identified by the doctor's variable projection
@@ -230,7 +263,7 @@ def run_study(conf: dict, data=None) -> dict:
                          progress=bool(conf.get("progress", False)))
         model_vessel_override = None
     timings.update(ident.timings)
-    metrics = {"n_samples": int(sum(len(r) for r in records)), **ident.metrics}
+    metrics = {"n_samples": int(sum(len(r) for r in records)), **sampling, **ident.metrics}
     artefacts = dict(ident.artefacts)
 
     # validation: the identified model (depth known, environment unknown) against the truth

@@ -29,7 +29,7 @@ def make_record(conf: dict):
     T = sim.get("duration") or man.duration_for(truth) * float(sim.get("duration_scale", 1.0))
     seed = int(conf.get("seed", 0))
     clean = simulate(truth, man, dt=dt, duration=T, seed=seed)
-    df = measurement(conf, seed=seed).apply(clean)
+    df = measurement(conf, seed=seed, vessel=truth).apply(clean)
     log = conf.get("rudder_log", "both")
     if log not in ("both", "actual", "command"):
         raise ValueError(f"rudder_log={log!r}: expected 'both', 'actual' or 'command'")

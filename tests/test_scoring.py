@@ -13,6 +13,7 @@ import pytest
 
 
 def _table(tmp_path, *overrides) -> tuple[pd.DataFrame, pd.DataFrame]:
+    tmp_path.mkdir(parents=True, exist_ok=True)
     res = tmp_path / "results"
     p = subprocess.run([sys.executable, "-m", "study", "experiment=tiny", "progress=false", *overrides],
                        cwd=tmp_path, env=dict(os.environ, STUDY_RESULTS_DIR=str(res), OPENBLAS_NUM_THREADS="1"),
@@ -49,3 +50,30 @@ def test_prior_columns_reach_the_params_table(tmp_path):
     assert {"prior_mean", "prior_sd", "identifiability"} <= set(p.columns)
     assert p["prior_mean"].notna().all() and (p["prior_sd"] > 0).all()
     assert ((p["identifiability"] > 0) & (p["identifiability"] <= 1.0 + 1e-9)).all()
+
+
+def test_sampling_interval_in_the_ships_time_scale_is_decimated_and_reported(tmp_path):
+    """noise.sample_dt_LU: the interval in units of L/U0, rounded to whole simulation steps; every run reports its
+    interval in seconds and in L/U0."""
+    runs, _ = _table(tmp_path, "vessel=kvlcc2", "noise=low", "noise.sample_dt_LU=0.02")
+    r = runs.iloc[0]
+    from study.sim import load_vessel
+
+    v = load_vessel("kvlcc2")
+    T = float(v.cfg["particulars"]["Lpp"]) / v.U0
+    assert r["m_sample_dt"] == pytest.approx(round(0.02 * T / 0.1) * 0.1, abs=1e-9)  # whole steps of 0.1 s
+    assert r["m_sample_dt_LU"] == pytest.approx(r["m_sample_dt"] / T)
+    assert abs(r["m_sample_dt_LU"] - 0.02) < 0.5 * 0.1 / T  # within half a step of what was asked
+    runs2, _ = _table(tmp_path / "b", "vessel=kvlcc2", "noise=low")
+    assert runs2["m_sample_dt"].iloc[0] == pytest.approx(0.1)  # default: every integration step
+    assert runs2["m_n_samples"].iloc[0] > 5 * r["m_n_samples"]
+
+
+def test_both_sampling_settings_is_an_error_naming_them(tmp_path):
+    res = tmp_path / "results"
+    p = subprocess.run([sys.executable, "-m", "study", "experiment=tiny", "progress=false", "noise.sample_dt=0.5",
+                        "noise.sample_dt_LU=0.01"], cwd=tmp_path,
+                       env=dict(os.environ, STUDY_RESULTS_DIR=str(res)), capture_output=True, text=True, timeout=600)
+    runs = pd.read_parquet(res / "runs.parquet")
+    assert runs["status"].iloc[0] == "failed"
+    assert "noise.sample_dt=0.5 and noise.sample_dt_LU=0.01: give one of them" in runs["error"].iloc[0]

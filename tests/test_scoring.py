@@ -77,3 +77,15 @@ def test_both_sampling_settings_is_an_error_naming_them(tmp_path):
     runs = pd.read_parquet(res / "runs.parquet")
     assert runs["status"].iloc[0] == "failed"
     assert "noise.sample_dt=0.5 and noise.sample_dt_LU=0.01: give one of them" in runs["error"].iloc[0]
+
+
+def test_a_second_order_model_of_a_first_order_truth_is_degenerate_not_exact():
+    from study.identify.models import make_model
+    from study.sim import load_vessel, read_config
+
+    truth, how, exact = make_model(read_config("model", "nomoto2_nl"), load_vessel("kt1_mariner")).truth()
+    assert not exact and how.startswith("degenerate") and truth["T2"] == 0.0
+    _, how1, exact1 = make_model(read_config("model", "nomoto1_nl"), load_vessel("kt1_mariner")).truth()
+    assert exact1 and how1.startswith("exact")
+    _, _, exact2 = make_model(read_config("model", "nomoto2_nl"), load_vessel("kt_mariner")).truth()
+    assert exact2

@@ -320,6 +320,12 @@ class NomotoModel(Model):
                 exact = not missing
                 if missing:
                     how = "approximate: the model omits " + " and ".join(missing) + " of the truth vessel; " + how
+                elif self.order == 2 and first:
+                    # a second-order model of a first-order truth: T2 = T3 = 0 is a limit the model can only
+                    # approach (the poles and the zero cancel), so no estimate of T2 or T3 can be "exact"
+                    exact = False
+                    how = ("degenerate: the truth is first order (T2 = T3 = 0), which the second-order model "
+                           "reaches only in the limit of a cancelling pole and zero; " + how)
             self._truth = ({k: float(t[k]) for k in self.oe_names}, how, exact)
         return self._truth
 

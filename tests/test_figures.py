@@ -100,7 +100,7 @@ def test_rebuilding_one_study_leaves_every_other_study_untouched(smoke, tmp_path
     assert {k: after.get(k) for k in others} == others
     assert "smoke/stale_figure.png" not in after and "smoke/fit_time.png" in after
     idx = json.loads(after["smoke/index.json"])
-    assert idx["study"] == "smoke" and idx["runs"] > 0 and idx["claim"] is None
+    assert idx["study"] == "smoke" and idx["runs"] > 0 and idx["claims"] == []
     assert after["CLAIMS.md"] == before["CLAIMS.md"]  # smoke makes no claim: every row stays as it was
     readme_before = [ln for ln in before["README.md"].decode().splitlines() if ln.startswith("| `")
                      and "| smoke" not in ln]

@@ -44,13 +44,14 @@ def _files(path: str) -> list[str]:
 
 
 def _claim_key(c: dict, seeds: dict) -> tuple:
-    """Seed papers' claims first, by seed number, then the harness's own, by study name."""
+    """Seed papers' claims first, by seed number, then the harness's own, by study name; a study's claims in the
+    order it made them (sorted() is stable)."""
     seed = seeds.get(c["study"])
     return (0, seed, c["study"]) if seed else (1, "", c["study"])
 
 
 def read_indexes(out: Path) -> dict[str, dict]:
-    """study -> its index (``{'study', 'runs', 'outputs': [{'path', 'what'}], 'claim'}``) of every study folder in
+    """study -> its index (``{'study', 'runs', 'outputs': [{'path', 'what'}], 'claims': [...]}``) of every study folder in
     ``out``, whether rebuilt now or before."""
     found = {}
     for p in sorted(out.glob(f"*/{INDEX}")):
@@ -85,7 +86,8 @@ def write_claims(out: Path, indexes: dict, not_built: list, seeds: dict) -> None
              "study that tests it on this harness's simulated data, and the verdict with its numbers (holds: in "
              "at least 80 % of the set-ups compared; holds in part: 30-80 %; does not hold: fewer).", "",
              "| seed | claim | study | verdict | numbers |", "|---|---|---|---|---|"]
-    claims = sorted((idx["claim"] for idx in indexes.values() if idx.get("claim")), key=lambda c: _claim_key(c, seeds))
+    claims = sorted((c for idx in indexes.values() for c in idx.get("claims") or []),
+                    key=lambda c: _claim_key(c, seeds))
     for c in claims:
         lines.append(f"| {c['seed']} | {_cell(c['claim'])} | `{c['study']}` | **{c['verdict']}** | {_cell(c['numbers'])} |")
     for m in sorted((m for m in not_built if seeds.get(m)), key=lambda m: seeds[m]):
@@ -102,7 +104,7 @@ def build_study(b: Builder, module, runs, params) -> dict:
     outs = b.written[first:]
     idx = {"study": name, "runs": int((runs["cfg_study"] == name).sum()),
            "outputs": [{"path": o.path, "what": o.what} for o in sorted(outs, key=lambda o: o.path)],
-           "claim": claims[0] if claims else None}
+           "claims": claims}
     folder = b.out / name
     folder.mkdir(parents=True, exist_ok=True)
     keep = {INDEX} | {Path(f).name for o in outs for f in _files(o.path)}

@@ -130,3 +130,30 @@ def test_every_study_module_has_its_experiment_and_every_experiment_with_a_study
     conf = REPO / "conf" / "experiment"
     named = {f.stem for f in conf.glob("*.yaml") if "\nstudy: " in "\n" + f.read_text()}
     assert set(found) == named, (sorted(found), sorted(named))
+
+
+def test_a_study_rebuilds_byte_identically_from_its_own_committed_table(smoke, tmp_path):
+    """Each rebuilt study keeps its table (finished runs, parameters, the artefacts its figures read) in
+    <out>/<study>/table/; with no results folder, `python -m study.figures` rebuilds from those tables alone, to
+    the same bytes (a fresh clone can rebuild paper_figs/ without re-running any study)."""
+    _, results, _ = smoke
+    a = tmp_path / "a"
+    p = subprocess.run([sys.executable, "-m", "study.figures", "--results", str(results), "--out", str(a)],
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-3000:]
+    table = a / "smoke" / "table"
+    assert (table / "runs.parquet").is_file() and (table / "params.parquet").is_file()
+    arts = [f for f in (table / "artefacts").rglob("*") if f.is_file()]
+    assert arts and len(arts) < len([f for f in (results / "artefacts").rglob("*") if f.is_file()])
+    b = tmp_path / "b"
+    shutil.copytree(a, b)
+    for f in b.rglob("*.png"):
+        f.unlink()  # the rebuild must make them again
+    empty = tmp_path / "cwd"
+    empty.mkdir()
+    env = {k: v for k, v in os.environ.items() if k != "STUDY_RESULTS_DIR"}
+    p = subprocess.run([sys.executable, "-m", "study.figures", "--out", str(b)], cwd=empty, env=env,
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert "rebuilding from the study tables committed" in p.stdout
+    assert _snapshot(a) == _snapshot(b)

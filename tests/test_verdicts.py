@@ -40,5 +40,6 @@ def test_compare_pairs_the_same_coefficient_of_the_same_data_and_settle_names_th
                                                     ("per equation", None, "err", "equation"),
                                                     ("only Y", p[p.equation == "Y"], "err", "coefficient")])
     assert list(t["choice"]) == ["primary", "per equation", "only Y"]
-    assert settle(t) == "holds, but depends on per equation: cannot tell"  # Y's median wins, N's loses
+    assert settle(t) == "holds; depends on the choice: cannot tell with per equation"  # Y's median wins, N's loses
     assert summary({"kcs": "holds", "kvlcc2": "holds", "usv": "cannot tell"}) == "holds for 2 of 3 models (usv: cannot tell)"
+    assert summary({"a": "holds", "b": "holds"}, "estimators") == "holds for both estimators"

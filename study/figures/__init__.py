@@ -20,14 +20,19 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
-from .plots import REPO, Builder, Output, _cell, load_tables
+import pandas as pd
+
+from .plots import REPO, Builder, Output, _cell, prepare_tables
 
 __all__ = ["build", "main", "Builder"]
 
 INDEX = "index.json"
+#: a study's own table in its output folder: its finished runs, parameters and the artefacts its figures read
+TABLE = "table"
 
 STATIC = [Output("kvlcc2_zigzags_vs_tank.{png,pdf}", "heading of the KVLCC2 L7 MMG model against HSVA's "
                  "free-running 10/10 and 20/10 zigzags (`python -m study.reality_check`)", "reality check"),
@@ -95,14 +100,30 @@ def write_claims(out: Path, indexes: dict, not_built: list, seeds: dict) -> None
     (out / "CLAIMS.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 
-def build_study(b: Builder, module, runs, params) -> dict:
+def study_slice(runs: pd.DataFrame, params: pd.DataFrame, name: str) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """One study's finished runs and their parameter rows, as stored (not yet joined), without the columns that
+    are empty for every one of its rows (another study's settings): the same frames whether they come from a
+    results folder that holds many studies or from the study's own committed table."""
+    r = runs[(runs["cfg_study"] == name) & (runs["status"] == "ok")] if len(runs) else runs
+    q = params[params["run_id"].isin(set(r["run_id"]))] if len(params) else params
+    r = r.dropna(axis=1, how="all").reset_index(drop=True)
+    q = q.dropna(axis=1, how="all").reset_index(drop=True)
+    return r, q
+
+
+def build_study(b: Builder, module, runs_raw, params_raw, table: bool = True) -> dict:
     """Rebuild one study into ``<out>/<name>/``: its outputs, then its index; files of that folder this rebuild
-    did not write (outputs a changed study no longer makes) are removed, nothing outside it is touched."""
+    did not write (outputs a changed study no longer makes) are removed, nothing outside it is touched. With
+    ``table``, the study's table goes into ``<out>/<name>/table/`` (its finished runs, their parameters and the
+    artefacts its figures read), from which ``python -m study.figures`` rebuilds it on a fresh clone."""
     name = module.NAME
+    r_raw, p_raw = study_slice(runs_raw, params_raw, name)
+    runs, params = prepare_tables(r_raw, p_raw)
     first, claims = len(b.written), []
+    b.read = set()
     module.build(b, runs, params, claims)
     outs = b.written[first:]
-    idx = {"study": name, "runs": int((runs["cfg_study"] == name).sum()),
+    idx = {"study": name, "runs": int(len(runs)),
            "outputs": [{"path": o.path, "what": o.what} for o in sorted(outs, key=lambda o: o.path)],
            "claims": claims}
     folder = b.out / name
@@ -111,27 +132,78 @@ def build_study(b: Builder, module, runs, params) -> dict:
     for f in folder.iterdir():
         if f.is_file() and f.name not in keep:
             f.unlink()
+    if table:
+        write_study_table(folder / TABLE, r_raw, p_raw, b)
     (folder / INDEX).write_text(json.dumps(idx, indent=1, sort_keys=True) + "\n", encoding="utf-8")
     return idx
 
 
-def build(results: Path, out: Path) -> Builder:
-    """Rebuild the outputs of every study found in the results table; compose README.md and CLAIMS.md from every
-    study's index in ``out`` (rebuilt now or before)."""
+def write_study_table(d: Path, runs: pd.DataFrame, params: pd.DataFrame, b: Builder) -> None:
+    """``d/runs.parquet``, ``d/params.parquet`` and ``d/artefacts/<run_id>/<name>`` for the artefacts read; any
+    other file under ``d`` is removed. Written through a temporary name and replaced, never half-written."""
+    d.mkdir(parents=True, exist_ok=True)
+    wanted = {Path("runs.parquet"), Path("params.parquet")}
+    for df, fname in ((runs, "runs.parquet"), (params, "params.parquet")):
+        tmp = d / f".{fname}.tmp"
+        df.to_parquet(tmp, index=False)
+        os.replace(tmp, d / fname)
+    for run_id, aname in sorted(b.read):
+        data = b.artefact(run_id, aname)
+        rel = Path("artefacts") / run_id / aname
+        wanted.add(rel)
+        dst = d / rel
+        if not (dst.is_file() and dst.read_bytes() == data):
+            dst.parent.mkdir(parents=True, exist_ok=True)
+            tmp = dst.with_name(f".{dst.name}.tmp")
+            tmp.write_bytes(data)
+            os.replace(tmp, dst)
+    for f in sorted(d.rglob("*"), reverse=True):
+        if f.is_file() and f.relative_to(d) not in wanted:
+            f.unlink()
+        elif f.is_dir() and not any(f.iterdir()):
+            f.rmdir()
+
+
+def committed_tables(out: Path) -> tuple[pd.DataFrame, pd.DataFrame, list]:
+    """(runs, params, artefact roots) of every study table committed under ``out`` (``<study>/table/``)."""
+    from ..results import read_table
+
+    runs, params, roots = [], [], []
+    for d in sorted(out.glob(f"*/{TABLE}")):
+        if (d / "runs.parquet").is_file() and (d / "params.parquet").is_file():
+            runs.append(read_table(d / "runs.parquet"))
+            params.append(read_table(d / "params.parquet"))
+            roots.append(d)
+    if not runs:
+        return pd.DataFrame(), pd.DataFrame(), []
+    return pd.concat(runs, ignore_index=True), pd.concat(params, ignore_index=True), roots
+
+
+def build(results: Path | None, out: Path, table: bool = True) -> Builder:
+    """Rebuild the outputs of every study found in the results table (``results``; None: the study tables
+    committed under ``out``); compose README.md and CLAIMS.md from every study's index in ``out`` (rebuilt now
+    or before)."""
+    from ..results import ResultStore
     from ..studies import discover
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    b = Builder(Path(results), out)
-    runs, params = load_tables(Path(results))
+    if results is None:
+        runs, params, roots = committed_tables(out)
+        b = Builder(out, out, artefact_roots=roots)
+    else:
+        runs, params = ResultStore(Path(results)).load()
+        b = Builder(Path(results), out)
+    if len(runs) and "cfg_study" not in runs:
+        runs["cfg_study"] = None
     studies = discover()
-    present = set(runs["cfg_study"].dropna()) if len(runs) else set()
+    present = set(runs.loc[runs["status"] == "ok", "cfg_study"].dropna()) if len(runs) else set()
     for name in sorted(present - set(studies)):
         print(f"study.figures: the table has runs of study '{name}' but no module study/studies/{name}.py; "
               f"nothing built for it", file=sys.stderr)
     for name, mod in studies.items():
         if name in present:
-            build_study(b, mod, runs, params)
+            build_study(b, mod, runs, params, table=table)
     indexes = read_indexes(out)
     not_built = [n for n in studies if n not in indexes]
     seeds = {n: m.SEED for n, m in studies.items()}
@@ -142,16 +214,33 @@ def build(results: Path, out: Path) -> Builder:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m study.figures", description=__doc__.splitlines()[0])
-    ap.add_argument("--results", default=None, help="results folder (default $STUDY_RESULTS_DIR or results/)")
+    ap.add_argument("--results", default=None, help="results folder (default $STUDY_RESULTS_DIR, else results/ if "
+                    "it holds a table, else the study tables committed under the output folder)")
     ap.add_argument("--out", default=str(REPO / "paper_figs"), help="output folder (default paper_figs/)")
+    ap.add_argument("--no-table", action="store_true", help="do not write the studies' tables into the output")
     args = ap.parse_args(argv)
-    import os
+    out = Path(args.out)
 
-    results = Path(args.results or os.environ.get("STUDY_RESULTS_DIR") or "results")
-    if not (results / "records").is_dir() and not (results / "runs.parquet").exists():
-        print(f"no results table in {results.resolve()} (run a study first: python -m study -m experiment=smoke)",
-              file=sys.stderr)
+    def has_table(d: Path) -> bool:
+        return (d / "records").is_dir() or (d / "runs.parquet").exists()
+
+    given = args.results or os.environ.get("STUDY_RESULTS_DIR")
+    if given:
+        results = Path(given)
+        if not has_table(results):
+            print(f"no results table in {results.resolve()} (run a study first: python -m study -m "
+                  f"experiment=smoke)", file=sys.stderr)
+            return 2
+    elif has_table(Path("results")):
+        results = Path("results")
+    elif any(out.glob(f"*/{TABLE}/runs.parquet")):
+        results = None
+        print(f"study.figures: no results table in {Path('results').resolve()}; rebuilding from the study tables "
+              f"committed in {out.resolve()}")
+    else:
+        print(f"no results table in {Path('results').resolve()} and no study tables in {out.resolve()} (run a "
+              f"study first: python -m study -m experiment=smoke)", file=sys.stderr)
         return 2
-    b = build(results, Path(args.out))
+    b = build(results, out, table=not args.no_table)
     print(f"{len(b.written)} outputs in {Path(args.out).resolve()}; claims in {Path(args.out) / 'CLAIMS.md'}")
     return 0

@@ -60,10 +60,18 @@ class Builder:
     results: Path
     out: Path
     written: list = field(default_factory=list)
+    #: folders whose ``artefacts/<run_id>/`` hold the runs' artefacts (default: the results folder)
+    artefact_roots: list = field(default_factory=list)
+    #: (run_id, name) of every artefact read, so a study's table can carry the few its figures need
+    read: set = field(default_factory=set)
 
     def artefact(self, run_id: str, name: str) -> bytes | None:
-        p = self.results / "artefacts" / run_id / name
-        return p.read_bytes() if p.is_file() else None
+        for root in self.artefact_roots or [self.results]:
+            p = Path(root) / "artefacts" / run_id / name
+            if p.is_file():
+                self.read.add((run_id, name))
+                return p.read_bytes()
+        return None
 
     def artefact_csv(self, run_id: str, name: str) -> pd.DataFrame | None:
         b = self.artefact(run_id, name)
@@ -92,18 +100,37 @@ def load_tables(results: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(runs, params) of the finished runs, params joined with the run columns the figures group by."""
     from ..results import ResultStore
 
-    runs, params = ResultStore(results).load()
+    return prepare_tables(*ResultStore(results).load())
+
+
+def prepare_tables(runs: pd.DataFrame, params: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The tables as the figures read them: finished runs only, params joined with the run columns the figures
+    group by."""
     if not len(runs):
         return runs, params
     runs = runs[runs["status"] == "ok"].copy()
     if "cfg_study" not in runs:
         runs["cfg_study"] = None
     keep = [c for c in ("run_id", "cfg_study", "cfg_noise.name", "cfg_depth.h_T", "cfg_vessel.operation.U0",
-                        "cfg_maneuvers.name", "cfg_seed", "cfg_vessel.particulars.Lpp") if c in runs]
+                        "cfg_maneuvers.name", "cfg_seed", "cfg_vessel.particulars.Lpp", "cfg_case.name",
+                        "m_sample_dt", "m_sample_dt_LU") if c in runs]
     p = params.drop(columns=[c for c in params.columns if c.startswith("cfg_") and c in keep], errors="ignore")
     p = p.merge(runs[keep], on="run_id", how="inner")
     p["abs_rel_error"] = p["rel_error"].abs()
+    for c in ("scaled_error", "term_scale", "m_sample_dt", "m_sample_dt_LU"):  # tables written before they existed
+        if c not in p:
+            p[c] = np.nan
     return runs, p
+
+
+def finest(df: pd.DataFrame) -> tuple[pd.DataFrame, list]:
+    """(the rows at the finest sampling interval swept, ``m_sample_dt_LU``; the other intervals, coarser first
+    last): figures that show one set-up show it at one named interval, never one picked by run-id order. A table
+    without the column (written before it existed) is returned whole."""
+    if "m_sample_dt_LU" not in df or not df["m_sample_dt_LU"].notna().any():
+        return df, []
+    dts = sorted(df["m_sample_dt_LU"].dropna().unique())
+    return df[df["m_sample_dt_LU"] == dts[0]], dts[1:]
 
 
 def _hT(x) -> str:

@@ -11,7 +11,9 @@ claim's direction; the Wilcoxon signed-rank test of the log error ratios is give
 - **does not hold**: losses outnumber wins beyond chance (p < 0.05 the other way);
 - **cannot tell**: neither (too few pairs, or as many losses as wins).
 
-A verdict is then recomputed under each reasonable alternative choice (metric, pairing unit, noise level,
+Within a pair, scaling both errors by the term's weight changes nothing (the same factor): the scaled error
+matters where errors are aggregated (medians per equation, or across coefficients). A verdict is then recomputed
+under each reasonable alternative choice (metric, pairing unit, noise level,
 sampling interval, subset of models...): :func:`settle` says "depends on ..." when the alternatives disagree with
 the primary choice, naming them. Verdicts are computed **per model** (never across models of different order or
 size, whose coefficient counts would weight the answer) and summarised as "holds for k of m models".
@@ -27,7 +29,7 @@ from scipy import stats
 ALPHA = 0.05
 TIE = 0.05
 
-__all__ = ["paired", "settle", "summary", "ALPHA", "TIE"]
+__all__ = ["paired", "compare", "sensitivity", "describe", "explain", "settle", "summary", "ALPHA", "TIE"]
 
 
 def paired(a, b, tie: float = TIE, floor: float = 0.0) -> dict:
@@ -84,18 +86,30 @@ def settle(table: pd.DataFrame, primary: str = "primary") -> str:
     off = table[(table["choice"] != primary) & (table["verdict"] != base)]
     if not len(off):
         return base
-    return f"{base}, but depends on " + "; ".join(f"{c}: {v}" for c, v in zip(off["choice"], off["verdict"]))
+    parts = [f"{v} with {', '.join(off.loc[off['verdict'] == v, 'choice'])}" for v in dict.fromkeys(off["verdict"])]
+    return f"{base}; depends on the choice: " + "; ".join(parts)
 
 
-def summary(per_model: dict) -> str:
-    """'holds for 3 of 4 models (kcs: cannot tell)' from model -> verdict."""
+def explain(table: pd.DataFrame) -> str:
+    """The primary comparison in a line, then the choices under which the verdict differs."""
+    prim = table.iloc[0].to_dict()
+    off = table[(table["choice"] != "primary") & (table["verdict"] != prim["verdict"])]
+    return describe(prim) + ("; other choices: " + ", ".join(f"{w}: {v}" for w, v in zip(off["what"], off["verdict"]))
+                             if len(off) else "; the same under every other choice")
+
+
+def summary(per_model: dict, noun: str = "models") -> str:
+    """'holds for 3 of 4 models (kcs: cannot tell)' from model -> verdict; 'holds for both models', 'holds for
+    all 3 models' when they agree."""
     if not per_model:
         return "not run"
     n = len(per_model)
     counts = pd.Series(list(per_model.values())).value_counts()
     top = counts.index[0]
+    if counts.iloc[0] == n:
+        return f"{top} for {'the one' if n == 1 else 'both' if n == 2 else f'all {n}'} {noun}"
     others = [f"{m}: {v}" for m, v in per_model.items() if v != top]
-    return f"{top} for {counts.iloc[0]} of {n} models" + (f" ({'; '.join(others)})" if others else "")
+    return f"{top} for {counts.iloc[0]} of {n} {noun} ({'; '.join(others)})"
 
 
 def compare(p: pd.DataFrame, by: str, a, b, keys: list, metric: str, unit: str = "coefficient",
@@ -117,11 +131,12 @@ def compare(p: pd.DataFrame, by: str, a, b, keys: list, metric: str, unit: str =
     return paired(piv[a], piv[b], tie=tie, floor=floor)
 
 
-def sensitivity(p: pd.DataFrame, by: str, a, b, keys: list, choices: list, tie: float = TIE) -> pd.DataFrame:
+def sensitivity(p: pd.DataFrame, by: str, a, b, keys: list, choices: list, tie: float = TIE,
+                floor: float = 0.0) -> pd.DataFrame:
     """The claim "``a`` beats ``b``" under each choice ``(label, rows, metric, unit)``; the first is the primary
     (labelled 'primary: <label>'). One row per choice with the paired statistics."""
     rows = []
     for i, (label, rows_of, metric, unit) in enumerate(choices):
-        r = compare(rows_of if rows_of is not None else p, by, a, b, keys, metric, unit, tie=tie)
+        r = compare(rows_of if rows_of is not None else p, by, a, b, keys, metric, unit, tie=tie, floor=floor)
         rows.append({"choice": "primary" if i == 0 else label, "what": label, **r})
     return pd.DataFrame(rows)

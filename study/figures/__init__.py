@@ -87,14 +87,23 @@ def write_readme(out: Path, indexes: dict, not_built: list) -> None:
 
 def write_claims(out: Path, indexes: dict, not_built: list, seeds: dict) -> None:
     lines = ["# Claims of the seed papers, tested", "",
-             "Rebuilt by `python -m study.figures` from the results table: each seed paper's headline claim, the "
-             "study that tests it on this harness's simulated data, and the verdict with its numbers (holds: in "
-             "at least 80 % of the set-ups compared; holds in part: 30-80 %; does not hold: fewer).", "",
+             "Rebuilt by `python -m study.figures` from the results table: each seed paper's headline claim (compound "
+             "claims split), the study that tests it on this harness's simulated data, and the verdict with its "
+             "numbers. A verdict is decided by paired comparisons (the same data identified both ways, coefficient "
+             "by coefficient, per model: never pooled across models of different order or size) with a one-sided "
+             "sign test at the 5 % level, ties (within 5 %, or both errors negligible) counted as ties: **holds**, "
+             "**does not hold**, or **cannot tell** when neither side wins beyond chance. Each study's "
+             "`claim_sensitivity` table gives the verdict under every other reasonable choice (metric, pairing, "
+             "noise level, sampling interval, model); a verdict that changes says so (*depends on the choice*). "
+             "Rows marked *earlier scoring* come from a study not re-run since: there the verdict is the share of "
+             "set-ups (holds: at least 80 %; holds in part: 30-80 %; does not hold: fewer).", "",
              "| seed | claim | study | verdict | numbers |", "|---|---|---|---|---|"]
     claims = sorted((c for idx in indexes.values() for c in idx.get("claims") or []),
                     key=lambda c: _claim_key(c, seeds))
     for c in claims:
-        lines.append(f"| {c['seed']} | {_cell(c['claim'])} | `{c['study']}` | **{c['verdict']}** | {_cell(c['numbers'])} |")
+        mark = " (*earlier scoring*)" if c.get("rule") == "share" else ""
+        lines.append(f"| {c['seed']} | {_cell(c['claim'])} | `{c['study']}` | **{c['verdict']}**{mark} | "
+                     f"{_cell(c['numbers'])} |")
     for m in sorted((m for m in not_built if seeds.get(m)), key=lambda m: seeds[m]):
         lines.append(f"| {seeds[m]} | (see the seed's row when run) | `{m}` | not run | - |")
     (out / "CLAIMS.md").write_text("\n".join(lines) + "\n", encoding="utf-8")

@@ -36,11 +36,11 @@ def build(b: Builder, runs, params, claims):
 def claim(cov: pd.DataFrame) -> dict:
     if not len(cov):
         return {"seed": "-", "claim": "emcee's 90 % intervals are calibrated", "study": "emcee_kt",
-                "verdict": "not run", "numbers": ""}
+                "rule": "share", "verdict": "not run", "numbers": ""}
     parts = [f"{r.structure}, noise {r.noise}: {r.covered}/{r.intervals} covered" for r in cov.itertuples()]
     good = cov[(cov["structure"] == "output_error") & (cov["noise"] == "low_outputs")]
     ok = float(good["coverage"].iloc[0]) if len(good) else float("nan")
     verdict = "holds" if 0.75 <= ok <= 1.0 else "does not hold"
     return {"seed": "(this harness)", "claim": "emcee's 90 % intervals cover the truth about 90 % of the time when "
             "the likelihood's assumptions hold (output error, noise on outputs only)", "study": "emcee_kt",
-            "verdict": verdict if np.isfinite(ok) else "not run", "numbers": "; ".join(parts) + "."}
+            "rule": "share", "verdict": verdict if np.isfinite(ok) else "not run", "numbers": "; ".join(parts) + "."}

@@ -58,13 +58,13 @@ def claim(tabs: dict) -> dict:
     t = tabs.get("noise")
     if t is None or not len(t):
         return {"seed": "(all)", "claim": "drift grows with noise for every estimator", "study": "grand",
-                "verdict": "not run", "numbers": ""}
+                "rule": "share", "verdict": "not run", "numbers": ""}
     g = t.pivot_table(index=["structure", "estimator"], columns="noise", values="median_abs_rel_error")
     cols = [c for c in NOISE_ORDER if c in g.columns]
     grows = int((g[cols[-1]] > g[cols[0]]).sum()) if len(cols) >= 2 else 0
     best = t[t["noise"] == cols[-1]].sort_values("median_abs_rel_error").iloc[0]
     return {"seed": "(all)", "claim": "parameter drift grows with the noise level for every estimator and structure",
-            "study": "grand", "verdict": _verdict(grows / len(g)) if len(g) else "not run",
+            "study": "grand", "rule": "share", "verdict": _verdict(grows / len(g)) if len(g) else "not run",
             "numbers": f"drift larger at noise {cols[-1]} than at {cols[0]} in {grows} of {len(g)} estimator x "
                        f"structure pairs; lowest median drift at noise {cols[-1]}: {best['estimator']} on "
                        f"{best['structure']} ({_pct(best['median_abs_rel_error'])})."}

@@ -45,15 +45,25 @@ def test_smoke_study_runs_everything(smoke):
     assert "[study] job #" in p.stdout  # the sweep shows its progress
 
 
-def test_figures_rebuild_byte_stable(smoke, tmp_path):
+@pytest.fixture(scope="module")
+def figs(smoke, tmp_path_factory):
+    """paper_figs/ built once from the smoke study's table (with its study table)."""
     root, results, _ = smoke
-    outs = []
-    for k in range(2):
-        out = tmp_path / f"figs{k}"
-        p = subprocess.run([sys.executable, "-m", "study.figures", "--results", str(results), "--out", str(out)],
-                           cwd=root, capture_output=True, text=True, timeout=600)
-        assert p.returncode == 0, p.stderr[-3000:]
-        outs.append(out)
+    out = tmp_path_factory.mktemp("figs") / "figs0"
+    p = subprocess.run([sys.executable, "-m", "study.figures", "--results", str(results), "--out", str(out)],
+                       cwd=root, capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-3000:]
+    return out
+
+
+def test_figures_rebuild_byte_stable(smoke, figs, tmp_path):
+    root, results, _ = smoke
+    outs = [figs]
+    out = tmp_path / "figs1"
+    p = subprocess.run([sys.executable, "-m", "study.figures", "--results", str(results), "--out", str(out)],
+                       cwd=root, capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-3000:]
+    outs.append(out)
     files = sorted(str(f.relative_to(outs[0])) for f in outs[0].rglob("*") if f.is_file())
     files2 = sorted(str(f.relative_to(outs[1])) for f in outs[1].rglob("*") if f.is_file())
     assert files == files2
@@ -132,15 +142,12 @@ def test_every_study_module_has_its_experiment_and_every_experiment_with_a_study
     assert set(found) == named, (sorted(found), sorted(named))
 
 
-def test_a_study_rebuilds_byte_identically_from_its_own_committed_table(smoke, tmp_path):
+def test_a_study_rebuilds_byte_identically_from_its_own_committed_table(smoke, figs, tmp_path):
     """Each rebuilt study keeps its table (finished runs, parameters, the artefacts its figures read) in
     <out>/<study>/table/; with no results folder, `python -m study.figures` rebuilds from those tables alone, to
     the same bytes (a fresh clone can rebuild paper_figs/ without re-running any study)."""
     _, results, _ = smoke
-    a = tmp_path / "a"
-    p = subprocess.run([sys.executable, "-m", "study.figures", "--results", str(results), "--out", str(a)],
-                       capture_output=True, text=True, timeout=600)
-    assert p.returncode == 0, p.stderr[-3000:]
+    a = figs
     table = a / "smoke" / "table"
     assert (table / "runs.parquet").is_file() and (table / "params.parquet").is_file()
     arts = [f for f in (table / "artefacts").rglob("*") if f.is_file()]
@@ -157,3 +164,23 @@ def test_a_study_rebuilds_byte_identically_from_its_own_committed_table(smoke, t
     assert p.returncode == 0, p.stderr[-3000:]
     assert "rebuilding from the study tables committed" in p.stdout
     assert _snapshot(a) == _snapshot(b)
+
+
+def test_the_committed_paper_figs_rebuild_from_their_tables_to_the_same_bytes(tmp_path):
+    """What a fresh clone does: `python -m study.figures` with no results folder rebuilds every study whose table
+    is committed, and every file of paper_figs/ comes out as committed (git status stays clean)."""
+    out = tmp_path / "paper_figs"
+    shutil.copytree(REPO / "paper_figs", out)
+    tables = sorted(p.parent.parent.name for p in out.glob("*/table/runs.parquet"))
+    assert tables, "no study table is committed"
+    before = _snapshot(out)
+    empty = tmp_path / "cwd"
+    empty.mkdir()
+    env = {k: v for k, v in os.environ.items() if k != "STUDY_RESULTS_DIR"}
+    p = subprocess.run([sys.executable, "-m", "study.figures", "--out", str(out)], cwd=empty, env=env,
+                       capture_output=True, text=True, timeout=900)
+    assert p.returncode == 0, p.stderr[-3000:]
+    after = _snapshot(out)
+    assert sorted(after) == sorted(before)
+    changed = sorted(k for k in before if before[k] != after[k])
+    assert not changed, changed

@@ -43,3 +43,4 @@ def test_compare_pairs_the_same_coefficient_of_the_same_data_and_settle_names_th
     assert settle(t) == "holds; depends on the choice: cannot tell with per equation"  # Y's median wins, N's loses
     assert summary({"kcs": "holds", "kvlcc2": "holds", "usv": "cannot tell"}) == "holds for 2 of 3 models (usv: cannot tell)"
     assert summary({"a": "holds", "b": "holds"}, "estimators") == "holds for both estimators"
+    assert summary({"a": "holds", "b": "does not hold"}) == "mixed over the 2 models: holds for a; does not hold for b"

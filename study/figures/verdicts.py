@@ -108,6 +108,9 @@ def summary(per_model: dict, noun: str = "models") -> str:
     top = counts.index[0]
     if counts.iloc[0] == n:
         return f"{top} for {'the one' if n == 1 else 'both' if n == 2 else f'all {n}'} {noun}"
+    if 2 * counts.iloc[0] <= n:  # no majority: every verdict with what it applies to
+        groups = [f"{v} for {', '.join(m for m, x in per_model.items() if x == v)}" for v in counts.index]
+        return f"mixed over the {n} {noun}: " + "; ".join(groups)
     others = [f"{m}: {v}" for m, v in per_model.items() if v != top]
     return f"{top} for {counts.iloc[0]} of {n} {noun} ({'; '.join(others)})"
 

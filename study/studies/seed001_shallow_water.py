@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 
 from ..figures.plots import (
-    ESTIMATOR_ORDER, NOISE_ORDER, _plt, _order, Builder, _hT, _first, fit_time_figure, lcurve_figure,
+    ESTIMATOR_ORDER, NOISE_ORDER, _plt, _order, Builder, _hT, _first, finest, fit_time_figure, lcurve_figure,
 )
 from ..figures.verdicts import explain, sensitivity, summary
 
@@ -32,6 +32,11 @@ def build(b: Builder, runs, params, claims):
         m = p["name"] == k
         p.loc[m, "estimate_nd"] = p.loc[m, "estimate"] * f[m]
         p.loc[m, "truth_nd"] = p.loc[m, "truth"] * f[m]
+    # figures at the finest sampling interval swept (named in their captions); the claims weigh every interval
+    r_all, p_all = r, p
+    r, p = finest(r_all)[0], finest(p_all)[0]
+    dt = p["m_sample_dt"].dropna()
+    at = f", sampled at {dt.min():g}-{dt.max():g} s ({p['m_sample_dt_LU'].min():.3g} L/U0)" if len(dt) else ""
     order = ["1.32", "1.46", "2.9", "5.6", "deep"]
     rows = []
     for model, names in (("nomoto1_nl", ["K", "T"]), ("nomoto2_nl", ["K", "T1", "T3"])):
@@ -66,7 +71,7 @@ def build(b: Builder, runs, params, claims):
                     ax.set_xlabel("h/T")
         axes[0, -1].legend(fontsize=5, ncol=1, loc="best")
         b.figure(fig, s, f"KT_vs_hT_{model}", f"non-dimensional Nomoto parameters against h/T per estimator and "
-                 f"speed ({model}; black: derived truth)")
+                 f"speed ({model}; black: derived truth{at})")
     if rows:
         b.table(pd.DataFrame(rows), s, "KT_vs_hT", "median non-dimensional Nomoto parameters per h/T, estimator, "
                 "speed and noise, with the derived truth")
@@ -88,8 +93,8 @@ def build(b: Builder, runs, params, claims):
             ax.set_title(f"{model}: median |relative error| of the Nomoto parameters")
             ax.set_xlabel("noise")
         axes[0].legend()
-        b.figure(fig, s, "drift_vs_noise", "median drift of the Nomoto parameters against the noise level")
-        b.table(pd.DataFrame(tab), s, "drift_vs_noise", "median drift of the Nomoto parameters against noise")
+        b.figure(fig, s, "drift_vs_noise", f"median drift of the Nomoto parameters against the noise level{at}")
+        b.table(pd.DataFrame(tab), s, "drift_vs_noise", f"median drift of the Nomoto parameters against noise{at}")
     # the L-curve of the truncated LS-SVM
     ent = []
     for nz in ("none", "medium"):
@@ -99,13 +104,14 @@ def build(b: Builder, runs, params, claims):
             ent.append((f"KCS, nomoto2_nl, h/T {_hT(run['cfg_depth.h_T'])}, noise {nz}", run))
     lcurve_figure(b, s, ent)
     fit_time_figure(b, r, s)
-    claims.extend(claim(b, r, p))
+    claims.extend(claim(b, r_all, p_all))
 
 
 #: "changes strongly", a labelled assumption: a non-dimensional K' or T' that moves by more than this fraction
 #: between deep water and h/T 1.32
 STRONG = 0.3
-KEYS = ["cfg_case.name", "cfg_depth.h_T", "cfg_noise.name", "cfg_seed", "cfg_structure.name", "m_sample_dt_LU"]
+KEYS = ["cfg_vessel.name", "cfg_vessel.operation.U0", "hT", "cfg_noise.name", "cfg_seed", "cfg_structure.name",
+        "m_sample_dt_LU"]
 
 
 def claim(b: Builder, r, p) -> list:

@@ -120,22 +120,23 @@ def claim(b: Builder, r, p) -> list:
             floatfmt=".3g")
     dts = sorted(t["sample_dt_LU"].dropna().unique())
     seed_dt = max(dts) if dts else np.nan  # the seed's interval, scaled (the coarser of the two swept)
-    prim = t[(t["criterion"] == "truth band") & (t["structure"] == "integral")
-             & ((t["sample_dt_LU"] == seed_dt) if dts else True)]
+    # primary: the seed's set-up -- integral samples of a clean simulation at its interval (scaled), truth band
+    is_prim = ((t["criterion"] == "truth band") & (t["structure"] == "integral") & (t["noise"] == "none")
+               & ((t["sample_dt_LU"] == seed_dt) if dts else True))
+    prim = t[is_prim]
     ok = bool(len(prim)) and bool(prim["all_within_seed"].all())
     verdict = "holds" if ok else "does not hold"
-    alt = []
-    for (crit, st, dt), g in t.groupby(["criterion", "structure", "sample_dt_LU"], dropna=False):
-        if crit == "truth band" and st == "integral" and (dt == seed_dt or not dts):
-            continue
-        alt.append((f"{crit}, {st}, {dt:.3g} L/U0", "holds" if g["all_within_seed"].all() else "does not hold"))
-    dissent = [f"{c}: {v}" for c, v in alt if v != verdict]
+    dissent = [f"{x.criterion}, {x.structure}, {x.sample_dt_LU:.3g} L/U0, noise {x.noise}"
+               for x in t[~is_prim].itertuples() if x.all_within_seed != ok]
+    if dissent:
+        verdict += f"; depends on the choice: {'does not hold' if ok else 'holds'} with " + "; ".join(dissent)
     nums = "; ".join(f"noise {x.noise}: median {x.median_samples:g} samples, largest {x.largest_samples:g}, "
                      f"{x.never_settled} of {x.coefficients} never settle" + (f" ({x.never})" if x.never else "")
                      for x in prim.itertuples())
     return [{"seed": "003 (Du et al. 2016)", "study": NAME,
              "claim": "with integral samples the incremental LS-SVM's derivatives all converge to the captive-test "
                       "values after about 20 samples",
-             "verdict": verdict + (", but depends on " + "; ".join(dissent) if dissent else ""),
-             "numbers": f"integral samples at the seed's interval scaled to this AUV ({seed_dt:.3g} L/U0), band "
-                        f"around the truth: {nums}. Table claim_settling has every run."}]
+             "verdict": verdict,
+             "numbers": f"integral samples of a clean simulation at the seed's interval scaled to this AUV "
+                        f"({seed_dt:.3g} L/U0), band around the truth: {nums}. Every run (both structures, both "
+                        f"intervals, noise none and low, both criteria) is in table claim_settling."}]

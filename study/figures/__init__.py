@@ -19,6 +19,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import os
 import sys
@@ -115,8 +116,10 @@ def study_slice(runs: pd.DataFrame, params: pd.DataFrame, name: str) -> tuple[pd
     results folder that holds many studies or from the study's own committed table."""
     r = runs[(runs["cfg_study"] == name) & (runs["status"] == "ok")] if len(runs) else runs
     q = params[params["run_id"].isin(set(r["run_id"]))] if len(params) else params
-    r = r.dropna(axis=1, how="all").reset_index(drop=True)
-    q = q.dropna(axis=1, how="all").reset_index(drop=True)
+    # through parquet once: a column typed 'object' in a table of many studies (bools beside another study's
+    # nulls) comes back as the type its own values have, as it will from the study's committed table
+    r = pd.read_parquet(io.BytesIO(r.dropna(axis=1, how="all").reset_index(drop=True).to_parquet(index=False)))
+    q = pd.read_parquet(io.BytesIO(q.dropna(axis=1, how="all").reset_index(drop=True).to_parquet(index=False)))
     return r, q
 
 
@@ -173,19 +176,17 @@ def write_study_table(d: Path, runs: pd.DataFrame, params: pd.DataFrame, b: Buil
             f.rmdir()
 
 
-def committed_tables(out: Path) -> tuple[pd.DataFrame, pd.DataFrame, list]:
-    """(runs, params, artefact roots) of every study table committed under ``out`` (``<study>/table/``)."""
+def committed_tables(out: Path) -> dict:
+    """study -> (runs, params, table folder) of every study table committed under ``out`` (``<study>/table/``).
+    Each study is rebuilt from its own table alone: concatenated, the tables' column types would mix and the
+    study's table would not come back to the same bytes."""
     from ..results import read_table
 
-    runs, params, roots = [], [], []
+    found = {}
     for d in sorted(out.glob(f"*/{TABLE}")):
         if (d / "runs.parquet").is_file() and (d / "params.parquet").is_file():
-            runs.append(read_table(d / "runs.parquet"))
-            params.append(read_table(d / "params.parquet"))
-            roots.append(d)
-    if not runs:
-        return pd.DataFrame(), pd.DataFrame(), []
-    return pd.concat(runs, ignore_index=True), pd.concat(params, ignore_index=True), roots
+            found[d.parent.name] = (read_table(d / "runs.parquet"), read_table(d / "params.parquet"), d)
+    return found
 
 
 def build(results: Path | None, out: Path, table: bool = True) -> Builder:
@@ -197,21 +198,24 @@ def build(results: Path | None, out: Path, table: bool = True) -> Builder:
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    studies = discover()
     if results is None:
-        runs, params, roots = committed_tables(out)
-        b = Builder(out, out, artefact_roots=roots)
+        sources = committed_tables(out)
+        b = Builder(out, out)
     else:
         runs, params = ResultStore(Path(results)).load()
+        if len(runs) and "cfg_study" not in runs:
+            runs["cfg_study"] = None
+        present = set(runs.loc[runs["status"] == "ok", "cfg_study"].dropna()) if len(runs) else set()
+        sources = {n: (runs, params, None) for n in present}
         b = Builder(Path(results), out)
-    if len(runs) and "cfg_study" not in runs:
-        runs["cfg_study"] = None
-    studies = discover()
-    present = set(runs.loc[runs["status"] == "ok", "cfg_study"].dropna()) if len(runs) else set()
-    for name in sorted(present - set(studies)):
+    for name in sorted(set(sources) - set(studies)):
         print(f"study.figures: the table has runs of study '{name}' but no module study/studies/{name}.py; "
               f"nothing built for it", file=sys.stderr)
     for name, mod in studies.items():
-        if name in present:
+        if name in sources:
+            runs, params, root = sources[name]
+            b.artefact_roots = [root] if root is not None else []
             build_study(b, mod, runs, params, table=table)
     indexes = read_indexes(out)
     not_built = [n for n in studies if n not in indexes]

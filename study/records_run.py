@@ -280,10 +280,10 @@ def run_config(conf: dict, data: FileData) -> dict:
 
 def check_study_name(conf: dict) -> None:
     """A run on files must not join a simulated study: its figures assume a truth and the simulated axes."""
-    from .figures import STUDIES
+    from .studies import discover
 
     name = conf.get("study")
-    if name in STUDIES:
+    if name in discover():
         raise RecordsInputError(f"study={name}: a simulated study (python -m study.figures builds its figures from "
                                 "runs with a truth); expected your own name (study=<name>) or none for a run on files")
 
@@ -422,10 +422,14 @@ def run_on_records(conf: dict, data: FileData) -> dict:
         timings.update(ident.timings)
         artefacts.update(ident.artefacts)
         ref = {p["name"]: p["truth"] for p in ident.params}
-        params = [{**p, "truth": None, "truth_kind": p["truth_kind"] if str(p.get("truth_kind", "")).startswith(
-                   "candidate") else TRUTH_KIND} for p in ident.params]
+        # identify() measured against the vessel config as if it were a truth: those figures are dropped (the
+        # term's weight on the user's records, term_scale, stays)
+        params = [{**{k: v for k, v in p.items() if k != "scaled_error"}, "truth": None,
+                   "truth_kind": p["truth_kind"] if str(p.get("truth_kind", "")).startswith("candidate")
+                   else TRUTH_KIND} for p in ident.params]
         drop = ("drift_median", "drift_max", "drift_mean", "truth_exact", "prior_is_truth")  # about a truth
-        metrics.update({k: v for k, v in ident.metrics.items() if k not in drop})
+        metrics.update({k: v for k, v in ident.metrics.items()
+                        if k not in drop and not k.startswith(("drift_", "scaled_drift_"))})
         rel = [abs(v - ref[k]) / abs(ref[k]) for k, v in ident.estimates.items()
                if v is not None and np.isfinite(v) and ref.get(k)]
         metrics["config_rel_diff_median"] = float(np.median(rel)) if rel else math.nan

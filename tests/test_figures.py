@@ -142,6 +142,17 @@ def test_every_study_module_has_its_experiment_and_every_experiment_with_a_study
     assert set(found) == named, (sorted(found), sorted(named))
 
 
+def _from_committed_tables(out: Path, tmp_path: Path) -> str:
+    """`python -m study.figures --out OUT` as on a fresh clone: no results folder, no STUDY_RESULTS_DIR."""
+    empty = tmp_path / "cwd"
+    empty.mkdir()
+    env = {k: v for k, v in os.environ.items() if k != "STUDY_RESULTS_DIR"}
+    p = subprocess.run([sys.executable, "-m", "study.figures", "--out", str(out)], cwd=empty, env=env,
+                       capture_output=True, text=True, timeout=900)
+    assert p.returncode == 0, p.stderr[-3000:]
+    return p.stdout
+
+
 def test_a_study_rebuilds_byte_identically_from_its_own_committed_table(smoke, figs, tmp_path):
     """Each rebuilt study keeps its table (finished runs, parameters, the artefacts its figures read) in
     <out>/<study>/table/; with no results folder, `python -m study.figures` rebuilds from those tables alone, to
@@ -156,13 +167,7 @@ def test_a_study_rebuilds_byte_identically_from_its_own_committed_table(smoke, f
     shutil.copytree(a, b)
     for f in b.rglob("*.png"):
         f.unlink()  # the rebuild must make them again
-    empty = tmp_path / "cwd"
-    empty.mkdir()
-    env = {k: v for k, v in os.environ.items() if k != "STUDY_RESULTS_DIR"}
-    p = subprocess.run([sys.executable, "-m", "study.figures", "--out", str(b)], cwd=empty, env=env,
-                       capture_output=True, text=True, timeout=600)
-    assert p.returncode == 0, p.stderr[-3000:]
-    assert "rebuilding from the study tables committed" in p.stdout
+    assert "rebuilding from the study tables committed" in _from_committed_tables(b, tmp_path)
     assert _snapshot(a) == _snapshot(b)
 
 
@@ -174,12 +179,7 @@ def test_the_committed_paper_figs_rebuild_from_their_tables_to_the_same_bytes(tm
     tables = sorted(p.parent.parent.name for p in out.glob("*/table/runs.parquet"))
     assert tables, "no study table is committed"
     before = _snapshot(out)
-    empty = tmp_path / "cwd"
-    empty.mkdir()
-    env = {k: v for k, v in os.environ.items() if k != "STUDY_RESULTS_DIR"}
-    p = subprocess.run([sys.executable, "-m", "study.figures", "--out", str(out)], cwd=empty, env=env,
-                       capture_output=True, text=True, timeout=900)
-    assert p.returncode == 0, p.stderr[-3000:]
+    _from_committed_tables(out, tmp_path)
     after = _snapshot(out)
     assert sorted(after) == sorted(before)
     changed = sorted(k for k in before if before[k] != after[k])

@@ -274,7 +274,8 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
         rq = [abs(p["estimate"] - p["truth"]) / abs(p["truth"]) for p in params if p["equation"] == eq
               and p["truth"] and p["name"] in truth and p["estimate"] is not None]
         sq = [p["scaled_error"] for p in params if p["equation"] == eq and p.get("scaled_error") is not None]
-        metrics[f"drift_median_{eq}"] = float(np.median(rq)) if rq else float("nan")
+        if rq:  # no truth (a run on the user's files): no drift metric at all
+            metrics[f"drift_median_{eq}"] = float(np.median(rq))
         if sq:
             metrics[f"scaled_drift_median_{eq}"] = float(np.median(sq))
             metrics[f"scaled_drift_max_{eq}"] = float(np.max(sq))

@@ -124,8 +124,8 @@ def prepare_tables(runs: pd.DataFrame, params: pd.DataFrame) -> tuple[pd.DataFra
 
 
 def finest(df: pd.DataFrame) -> tuple[pd.DataFrame, list]:
-    """(the rows at the finest sampling interval swept, ``m_sample_dt_LU``; the other intervals, coarser first
-    last): figures that show one set-up show it at one named interval, never one picked by run-id order. A table
+    """(the rows at the finest sampling interval swept, ``m_sample_dt_LU``; the other intervals, finest first):
+    figures that show one set-up show it at one named interval, never one picked by run-id order. A table
     without the column (written before it existed) is returned whole."""
     if "m_sample_dt_LU" not in df or not df["m_sample_dt_LU"].notna().any():
         return df, []

@@ -56,7 +56,11 @@ node_state() {  # the node's state as sinfo prints it (idle, mix, alloc, down*, 
     timeout 10 sinfo -h -n "$NODE" -o %t 2>/dev/null | head -n 1 || true
 }
 
-up() { case "$(node_state)" in idle|mix|mixed|alloc|allocated|comp|completing) return 0;; *) return 1;; esac; }
+up() {  # both daemons of this script alive, munge answering and the node taking jobs
+    alive "$STATE/slurmctld.pid" && alive "$STATE/slurmd.pid" || return 1
+    munge -n 2>/dev/null | unmunge >/dev/null 2>&1 || return 1
+    case "$(node_state)" in idle|mix|mixed|alloc|allocated|comp|completing) return 0;; *) return 1;; esac
+}
 
 install() {
     local missing=""
@@ -188,6 +192,9 @@ status() {
     timeout 10 sinfo 2>&1 || true
     timeout 10 squeue 2>&1 || true
     if up; then return 0; fi
+    local d
+    for d in slurmctld slurmd; do alive "$STATE/$d.pid" || say "$d is not running"; done
+    munge -n 2>/dev/null | unmunge >/dev/null 2>&1 || say "munged does not answer"
     say "node $NODE not taking jobs (state: '$(node_state)')"
     return 1
 }

@@ -62,7 +62,7 @@ up() {  # both daemons of this script alive, munge answering and the node taking
     case "$(node_state)" in idle|mix|mixed|alloc|allocated|comp|completing) return 0;; *) return 1;; esac
 }
 
-install() {
+install_packages() {
     local missing=""
     for c in munged munge unmunge slurmctld slurmd sinfo sbatch; do command -v "$c" >/dev/null 2>&1 || missing="$missing $c"; done
     [ -z "$missing" ] && return 0
@@ -149,7 +149,7 @@ start() {
     if [ -f "$CONF" ] && ! ours; then
         die "$CONF exists and was not written by this script (a real cluster's?); not touching it"
     fi
-    install
+    install_packages
     if up; then say "already running: node $NODE $(node_state)"; return 0; fi
     stop_daemons  # leftovers of an earlier start (a daemon that died, stale pid files)
     mkdir -p "$STATE"

@@ -1,0 +1,250 @@
+"""Sweeps submitted to a real SLURM cluster through ``hydra/launcher=slurm`` (conf/hydra/launcher/slurm.yaml, Hydra's
+submitit launcher): every record lands once in the shared results folder and the tables are rebuilt; a job that
+fails is recorded as failed while the others complete; a sweep whose jobs are cancelled with ``scancel`` half way is
+finished by running the same command again, without recomputing the runs already finished.
+
+The cluster is the throw-away single-node one of ``scripts/slurm_cluster.sh start`` (.ci/run starts it). These tests
+never submit to any other cluster (a site's login node): they check ``ClusterName=study`` first. They are skipped
+with the reason when that cluster is not up, unless STUDY_REQUIRE_SLURM=1 (set by .ci/run once it has started it),
+in which case they fail instead of silently skipping.
+
+Each sweep is launched from a scratch folder outside the repository, with an absolute ``results_dir``, as a
+researcher would from a cluster's login node: the jobs find ``conf/`` and the results folder from the compute node
+on their own. The runs are tiny (``experiment=tiny``, the exact KT Mariner, a second-order Nomoto model: about a
+second each, plus the job's Python start).
+"""
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+import study
+
+pytestmark = pytest.mark.slurm
+
+CLUSTER_NAME = "study"  # scripts/slurm_cluster.sh
+UP_STATES = {"idle", "mix", "mixed", "alloc", "allocated", "comp", "completing"}
+SWEEP_TIMEOUT = 300  # s; a sweep here takes 20-60 s
+# the package under test, wherever it is imported from (an editable install, or PYTHONPATH in a worktree): the
+# launcher and, through sbatch's exported environment, the jobs import the same code
+CODE_ROOT = str(Path(study.__file__).resolve().parents[1])
+
+
+def _cluster_or_skip() -> None:
+    why = None
+    if shutil.which("sinfo") is None or shutil.which("sbatch") is None or shutil.which("scontrol") is None:
+        why = "no SLURM client (sinfo, sbatch, scontrol) on PATH; start the throw-away cluster: scripts/slurm_cluster.sh start"
+    else:
+        try:
+            conf = subprocess.run(["scontrol", "show", "config"], capture_output=True, text=True, timeout=20)
+            states = subprocess.run(["sinfo", "-h", "-o", "%t"], capture_output=True, text=True, timeout=20)
+        except subprocess.TimeoutExpired:
+            conf = states = None
+        if conf is None or conf.returncode != 0:
+            err = "timed out" if conf is None else (conf.stderr.strip().splitlines() or ["no output"])[-1]
+            why = f"no SLURM controller answers (scontrol show config: {err}); start it: scripts/slurm_cluster.sh start"
+        else:
+            name = next((ln.split("=", 1)[1].strip() for ln in conf.stdout.splitlines()
+                         if ln.split("=", 1)[0].strip() == "ClusterName"), None)
+            found = {s.strip().rstrip("*~#$@^-") for s in states.stdout.split()} if states.returncode == 0 else set()
+            if name != CLUSTER_NAME:
+                why = (f"the SLURM cluster here is '{name}', not the throw-away '{CLUSTER_NAME}' of "
+                       "scripts/slurm_cluster.sh: these tests never submit to a real cluster")
+            elif not found & UP_STATES:
+                why = f"the throw-away SLURM cluster has no node taking jobs (sinfo states: {sorted(found) or 'none'})"
+    if why is not None:
+        if os.environ.get("STUDY_REQUIRE_SLURM") == "1":
+            pytest.fail(f"STUDY_REQUIRE_SLURM=1 but {why}")
+        pytest.skip(why)
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    _cluster_or_skip()
+
+
+def _env() -> dict:
+    # OMP_NUM_THREADS left out: the jobs get it from the launcher config's setup line
+    env = {k: v for k, v in os.environ.items() if k not in ("STUDY_RESULTS_DIR", "OMP_NUM_THREADS")}
+    env["PYTHONPATH"] = os.pathsep.join([CODE_ROOT] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
+    env.update(OPENBLAS_NUM_THREADS="1", HYDRA_FULL_ERROR="1")
+    return env
+
+
+def _sweep_cmd(results: Path, name: str, *overrides: str) -> list[str]:
+    """The sweep as a researcher types it (plus a unique job name, so that the test can find and cancel its jobs)."""
+    return [sys.executable, "-m", "study", "-m", "hydra/launcher=slurm", f"hydra.launcher.name={name}",
+            "experiment=tiny", "case=kt_nomoto2", f"results_dir={results}", "progress=false", *overrides]
+
+
+def _records(results: Path) -> dict[str, dict]:
+    """The run records in the results folder, by file name (records/<run_id>.json, results/README.md)."""
+    out = {}
+    for p in sorted((results / "records").glob("*.json")):
+        try:
+            out[p.name] = json.loads(p.read_text(encoding="utf-8"))
+        except ValueError:  # never expected: records are written atomically
+            out[p.name] = {"torn": True}
+    return out
+
+
+def _scancel(name: str) -> None:
+    subprocess.run(["scancel", f"--name={name}"], capture_output=True, timeout=30)
+
+
+def _queued(name: str) -> list[str]:
+    r = subprocess.run(["squeue", "-h", f"--name={name}", "-o", "%i %T"], capture_output=True, text=True, timeout=30)
+    return r.stdout.splitlines()
+
+
+def _finish(proc: subprocess.Popen, log: Path, name: str, timeout: float = SWEEP_TIMEOUT) -> int:
+    try:
+        return proc.wait(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        _scancel(name)
+        proc.kill()
+        proc.wait()
+        pytest.fail(f"the sweep did not end within {timeout} s; its output ends with:\n{_tail(log)}")
+
+
+def _tail(log: Path, n: int = 40) -> str:
+    """The sweep's last lines, without submitit's warnings that sacct does not answer (the throw-away cluster
+    keeps no accounting)."""
+    if not log.exists():
+        return "(no output)"
+    lines = [ln for ln in log.read_text(errors="replace").splitlines()
+             if "sacct" not in ln and "accounting storage is disabled" not in ln]
+    return "\n".join(lines[-n:])
+
+
+def _run_sweep(cmd: list[str], cwd: Path, log: Path, name: str) -> int:
+    with open(log, "ab") as fh:
+        proc = subprocess.Popen(cmd, cwd=cwd, env=_env(), stdout=fh, stderr=subprocess.STDOUT)
+        try:
+            return _finish(proc, log, name)
+        finally:
+            _scancel(name)  # nothing of this test stays queued, whatever happened
+
+
+def _check_tables(results: Path, records: dict[str, dict]) -> pd.DataFrame:
+    runs = pd.read_parquet(results / "runs.parquet")
+    params = pd.read_parquet(results / "params.parquet")
+    assert runs["run_id"].is_unique
+    assert set(runs["run_id"]) == {r["run_id"] for r in records.values()}
+    by_id = runs.set_index("run_id")["status"].to_dict()
+    assert by_id == {r["run_id"]: r["status"] for r in records.values()}
+    ok = {r["run_id"] for r in records.values() if r["status"] == "ok"}
+    assert set(params["run_id"]) == ok  # each run that identified something has its coefficients in the table
+    return runs
+
+
+def test_sweep_lands_every_record_once_and_records_a_failing_job(cluster, tmp_path):
+    """Six jobs on the cluster: ls, lssvm and ridge on two seeds, ridge given one cross-validation fold (it raises:
+    at least two are needed). The four others finish ok, the two ridge runs are recorded as failed with the error,
+    and the sweep itself ends normally with the tables rebuilt from all six records. The sweep goes in batches of
+    four (hydra.sweeper.max_batch_size, how a sweep larger than a site's MaxArraySize is submitted): two arrays."""
+    name = f"study-test-{uuid.uuid4().hex[:8]}"
+    results = tmp_path / "shared" / "results"  # absolute: the jobs resolve it on the compute node
+    work = tmp_path / "login"
+    work.mkdir()
+    log = tmp_path / "sweep.log"
+    cmd = _sweep_cmd(results, name, "estimator=ls,lssvm,ridge", "seed=0,1", "+estimator_overrides.ridge.n_splits=1",
+                     "hydra.sweeper.max_batch_size=4")
+    rc = _run_sweep(cmd, work, log, name)
+    assert rc == 0, _tail(log)
+    assert list(work.glob("multirun/*/*/.submitit")), "the sweep did not go through submitit"
+
+    recs = _records(results)
+    assert len(recs) == 6, f"{len(recs)} records: {sorted(recs)}\n{_tail(log)}"
+    assert len({r["run_id"] for r in recs.values()}) == 6
+    assert all(p == f"{r['run_id']}.json" for p, r in recs.items())
+    by = {(r["config"]["estimator"]["name"], r["seed"]): r for r in recs.values()}
+    assert set(by) == {(e, s) for e in ("ls", "lssvm", "ridge") for s in (0, 1)}
+    for (est, seed), r in by.items():
+        if est == "ridge":
+            assert r["status"] == "failed"
+            assert "cross-validation needs at least 2 folds" in r["error"]
+        else:
+            assert r["status"] == "ok", r.get("error")
+            assert r["params"], f"{est} seed {seed}: no coefficients"
+    # each job ran as one task of a SLURM job array (submitit names its folder <array id>_<index>): 4 + 2
+    job_dirs = [p.name for p in work.glob("multirun/*/*/.submitit/*_*") if re.fullmatch(r"\d+_\d+", p.name)]
+    arrays = {}
+    for d in job_dirs:
+        arrays.setdefault(d.split("_")[0], []).append(d)
+    assert sorted(len(v) for v in arrays.values()) == [2, 4], sorted(job_dirs)
+    # the ready config's setup line: one BLAS/OpenMP thread per CPU the job asked for (cpus_per_task: 1)
+    assert all(r["provenance"]["omp_num_threads"] == 1 for r in recs.values())
+    assert not list((results / "records" / "failed").glob("*.json"))  # first attempts: nothing retried
+    _check_tables(results, recs)
+
+
+def test_cancelled_sweep_is_finished_by_the_same_command(cluster, tmp_path):
+    """Eight jobs; once two records have landed the whole array is cancelled with scancel (jobs killed mid-run,
+    others never started). The same command, run again, finishes the sweep: every record present once, and the
+    runs finished before the cancel not run again (their records untouched)."""
+    name = f"study-test-{uuid.uuid4().hex[:8]}"
+    results = tmp_path / "shared" / "results"
+    work = tmp_path / "login"
+    work.mkdir()
+    log = tmp_path / "sweep.log"
+    cmd = _sweep_cmd(results, name, "estimator=ls,lssvm", "seed=0,1,2,3")
+    n_runs = 8
+
+    with open(log, "ab") as fh:
+        proc = subprocess.Popen(cmd, cwd=work, env=_env(), stdout=fh, stderr=subprocess.STDOUT)
+        try:
+            deadline = time.monotonic() + SWEEP_TIMEOUT
+            while len(_records(results)) < 2:
+                assert proc.poll() is None, f"the sweep ended before any cancel:\n{_tail(log)}"
+                assert time.monotonic() < deadline, f"no two records within {SWEEP_TIMEOUT} s:\n{_tail(log)}"
+                time.sleep(0.2)
+            _scancel(name)
+            t_cancel = time.monotonic()
+            while _queued(name) and time.monotonic() - t_cancel < 60:
+                time.sleep(0.5)
+            assert not _queued(name), f"jobs still queued a minute after scancel: {_queued(name)}"
+            # On a cluster with accounting (sacct) submitit sees the cancelled jobs and the command stops with an
+            # error; without (the throw-away cluster) it cannot tell and waits: the researcher presses Ctrl-C.
+            try:
+                rc_first = proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                proc.send_signal(signal.SIGINT)
+                rc_first = _finish(proc, log, name, timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+            _scancel(name)
+    assert rc_first != 0, "a sweep whose jobs were cancelled must not end as a success"
+
+    before = _records(results)
+    assert 2 <= len(before) < n_runs, f"the cancel did not land half way: {len(before)} of {n_runs} records"
+    assert all(r.get("status") == "ok" for r in before.values()), before
+
+    rc = _run_sweep(cmd, work, log, name)
+    assert rc == 0, _tail(log)
+    after = _records(results)
+    assert len(after) == n_runs and len({r["run_id"] for r in after.values()}) == n_runs, sorted(after)
+    assert all(r["status"] == "ok" for r in after.values()), [r.get("error") for r in after.values()]
+    # not recomputed: the records finished before the cancel are the same records, byte for byte in content
+    for p, r in before.items():
+        assert after[p] == r, f"{p} was rewritten by the re-run"
+    assert not list((results / "records" / "failed").glob("*.json"))
+    assert {(r["config"]["estimator"]["name"], r["seed"]) for r in after.values()} == {
+        (e, s) for e in ("ls", "lssvm") for s in range(4)}
+    # the re-run's jobs said so, each in its own log (the app's line for a run found finished)
+    logs = "\n".join(p.read_text(errors="replace") for p in work.glob("multirun/*/*/.submitit/*/*_log.*"))
+    assert logs.count("(already finished, resumed)") == len(before), logs[-3000:]
+    _check_tables(results, after)

@@ -99,21 +99,26 @@ def write_outputs(table: pd.DataFrame, traces: dict, out_dir: Path = OUT_DIR) ->
                   "Overshoots in degrees, periods in seconds (model scale). Rebuilt by "
                   "`python -m study.reality_check`.\n\n" + table.round(2).to_markdown(index=False) + "\n")
     paths += [csv, md]
-    plt.rcParams["svg.hashsalt"] = "study"
-    fig, axes = plt.subplots(len(traces), 1, figsize=(8, 2.4 * len(traces)), sharex=False)
-    for ax, (run, tr) in zip(np.atleast_1d(axes), traces.items()):
+    from .figures.style import PRINT_WIDTH_IN, rc
+
+    plt.rcParams.update(rc())
+    fig, axes = plt.subplots(len(traces), 1, figsize=(PRINT_WIDTH_IN, 2.3 * len(traces) + 0.6), sharex=False,
+                             squeeze=False, layout="constrained")
+    for ax, (run, tr) in zip(axes[:, 0], traces.items()):
         m = tr["measured"]
-        ax.plot(m.time, np.degrees(m.psi - m.psi.iloc[0]), "k", lw=1.5, label="HSVA measured psi")
-        ax.plot(m.time, np.degrees(m.delta), "k:", lw=1, label="measured rudder")
-        for prop, style in (("mmg_self_propulsion", "C0"), ("hsva_rpm", "C3--")):
+        amp, sw, side = run.split("_")[1:]
+        ax.plot(m.time, np.degrees(m.psi - m.psi.iloc[0]), "k", lw=1.5, label="heading psi, HSVA measured")
+        ax.plot(m.time, np.degrees(m.delta), "k:", lw=1, label="rudder delta, measured")
+        for prop, colour, ls in (("mmg_self_propulsion", "#0072B2", "-"), ("hsva_rpm", "#D55E00", "--")):
             s = tr[prop]
-            ax.plot(s.time, np.degrees(s.psi - s.psi.iloc[0]), style, lw=1.2, label=f"MMG, {prop}")
-        ax.set_title(run.replace("_", " "), fontsize=9)
-        ax.set_ylabel("deg")
+            ax.plot(s.time, np.degrees(s.psi - s.psi.iloc[0]), color=colour, ls=ls, lw=1.2,
+                    label=f"heading psi, MMG, {prop}")
+        ax.set_title(f"HSVA {run}: {int(amp)}/{int(sw)} zigzag, {'port' if side == 'P' else 'starboard'} first")
+        ax.set_ylabel("psi, delta [deg]")
+        ax.set_xlabel("time [s] (model scale)")
         ax.grid(alpha=0.3)
-    np.atleast_1d(axes)[0].legend(fontsize=7, ncol=2)
-    np.atleast_1d(axes)[-1].set_xlabel("time [s] (model scale)")
-    fig.tight_layout()
+    h, lab = axes[0, 0].get_legend_handles_labels()
+    fig.legend(h, lab, loc="outside lower center", ncol=2)
     for ext in ("png", "pdf"):
         p = out_dir / f"kvlcc2_zigzags_vs_tank.{ext}"
         fig.savefig(p, dpi=120, metadata={"CreationDate": None} if ext == "pdf" else {"Software": None})

@@ -53,6 +53,7 @@ def figs(smoke, tmp_path_factory):
     p = subprocess.run([sys.executable, "-m", "study.figures", "--results", str(results), "--out", str(out)],
                        cwd=root, capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stderr[-3000:]
+    assert "not fit for print" not in p.stderr, p.stderr[-3000:]  # study/figures/style.py's rules
     return out
 
 
@@ -150,6 +151,7 @@ def _from_committed_tables(out: Path, tmp_path: Path) -> str:
     p = subprocess.run([sys.executable, "-m", "study.figures", "--out", str(out)], cwd=empty, env=env,
                        capture_output=True, text=True, timeout=900)
     assert p.returncode == 0, p.stderr[-3000:]
+    assert "not fit for print" not in p.stderr, p.stderr[-3000:]  # study/figures/style.py's rules
     return p.stdout
 
 

@@ -2,17 +2,26 @@
 figures, CSV and Markdown tables, byte-stable between rebuilds), the results table as the figures read it
 (:func:`load_tables`), and the plots and tables several studies share (drift heatmaps, fit times, collinearity,
 validation traces, L-curves, online convergence, emcee posteriors). A study's own figures and its claim live in
-its module of :mod:`study.studies`."""
+its module of :mod:`study.studies`; how every figure looks (colours and markers per estimator and structure, fonts,
+log ticks, units) is :mod:`study.figures.style`."""
 from __future__ import annotations
 
 import io
 import json
 import math
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import textwrap
+
 import numpy as np
 import pandas as pd
+
+from .style import (
+    ESTIMATOR_STYLE, OKABE_BLUE, PRINT_WIDTH_IN, STRUCTURE_STYLE, TOL_MUTED, TRUTH_STYLE, annotate_cells, estimator_style,
+    log_ticks, param_label, rc, readability_problems, sampling_label, short_number, structure_style,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -36,9 +45,13 @@ def _plt():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    plt.rcParams.update({"svg.hashsalt": "study", "figure.dpi": 100, "font.size": 8, "axes.titlesize": 9,
-                         "legend.fontsize": 7, "pdf.fonttype": 42})
+    plt.rcParams.update(rc())
     return plt
+
+
+def _wrap(text: str, width: int = 100) -> str:
+    """A figure title broken into lines that fit the figure (about 100 characters of 10 pt on PRINT_WIDTH_IN)."""
+    return "\n".join(textwrap.wrap(text, width, break_on_hyphens=False))
 
 
 def _order(values, preferred):
@@ -64,6 +77,9 @@ class Builder:
     artefact_roots: list = field(default_factory=list)
     #: (run_id, name) of every artefact read, so a study's table can carry the few its figures need
     read: set = field(default_factory=set)
+    #: what keeps each figure written from print (``study/name: problem``; :func:`style.readability_problems`),
+    #: also printed to stderr: a figure is still written, the rebuild says what to fix
+    problems: list = field(default_factory=list)
 
     def artefact(self, run_id: str, name: str) -> bytes | None:
         for root in self.artefact_roots or [self.results]:
@@ -79,6 +95,10 @@ class Builder:
 
     def figure(self, fig, study: str, name: str, what: str) -> None:
         plt = _plt()
+        found = [f"{study}/{name}: {p}" for p in readability_problems(fig)]
+        for p in found:
+            print(f"study.figures: not fit for print: {p}", file=sys.stderr)
+        self.problems += found
         d = self.out / study
         d.mkdir(parents=True, exist_ok=True)
         for ext in ("png", "pdf"):
@@ -113,7 +133,7 @@ def prepare_tables(runs: pd.DataFrame, params: pd.DataFrame) -> tuple[pd.DataFra
         runs["cfg_study"] = None
     keep = [c for c in ("run_id", "cfg_study", "cfg_noise.name", "cfg_depth.h_T", "cfg_vessel.operation.U0",
                         "cfg_maneuvers.name", "cfg_seed", "cfg_vessel.particulars.Lpp", "cfg_case.name",
-                        "m_sample_dt", "m_sample_dt_LU") if c in runs]
+                        "m_sample_dt", "m_sample_dt_LU", "cfg_noise.sample_dt_LU") if c in runs]
     p = params.drop(columns=[c for c in params.columns if c.startswith("cfg_") and c in keep], errors="ignore")
     p = p.merge(runs[keep], on="run_id", how="inner")
     p["abs_rel_error"] = p["rel_error"].abs()
@@ -137,52 +157,92 @@ def _hT(x) -> str:
     return "deep" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{float(x):g}"
 
 
+def at_sampling(df: pd.DataFrame, which: str = "finest") -> pd.DataFrame:
+    """The rows of a figure that shows one sampling interval: the finest (``which='finest'``) or the coarsest of
+    the intervals the sweep asked for (``cfg_noise.sample_dt_LU``, in L/U0). Selected by the requested value, not
+    the realised one (``m_sample_dt_LU``): each vessel and speed decimates the request to its own nearest step,
+    so the realised finest value can belong to one vessel alone. A table without the request falls back on the
+    realised interval; one without either is returned whole. (The claims use :func:`finest`.)"""
+    for col in ("cfg_noise.sample_dt_LU", "m_sample_dt_LU"):
+        if col in df and df[col].notna().any():
+            vals = sorted(df[col].dropna().unique())
+            return df[df[col] == (vals[0] if which == "finest" else vals[-1])]
+    return df
+
+
 def _first(df: pd.DataFrame, **eq) -> pd.Series | None:
+    """The run of ``df`` matching ``eq``; of several (datasets), the lowest seed (the figure names it)."""
     sel = df
     for k, v in eq.items():
         sel = sel[sel[k] == v]
     if not len(sel):
         return None
-    return sel.sort_values("run_id").iloc[0]
+    by = [c for c in ("cfg_seed", "run_id") if c in sel]
+    return sel.sort_values(by).iloc[0]
 
 
 def drift_heatmaps(b: Builder, runs, params, study: str, model: str, noise: str, name: str):
-    """Median |relative error| per estimator x parameter, one panel per structure."""
+    """Median |relative error| per estimator x parameter, one panel per structure. Each cell's number is written
+    where it fits at 8 pt, else the title points to the table with the numbers; grey cells have no relative error
+    (a zero truth) or no run."""
     p = params[(params["cfg_model.name"] == model) & (params["cfg_noise.name"] == noise)
                & params["truth_kind"].isin(["exact", "approximate", "derived"])]
     if not len(p):
         return None
     plt = _plt()
+    from matplotlib import colormaps
+    from matplotlib.colors import LogNorm
+
     structs = _order(p["cfg_structure.name"], STRUCTURE_ORDER)
     names = (p[["equation", "name"]].drop_duplicates()
              .assign(o=lambda d: d["equation"].map(EQ_ORDER).fillna(3)).sort_values(["o"], kind="stable"))
     pnames = list(dict.fromkeys(names["name"]))
     ests = _order(p["cfg_estimator.name"], ESTIMATOR_ORDER)
-    fig, axes = plt.subplots(len(structs), 1, figsize=(max(6, 0.42 * len(pnames) + 2), 1.0 + 0.32 * len(ests) *
-                                                        len(structs)), squeeze=False)
-    from matplotlib.colors import LogNorm
-
-    table = []
+    zero = {n for n, d in p.groupby("name") if (d["truth"] == 0).all()}
+    fig, axes = plt.subplots(len(structs), 1, figsize=(PRINT_WIDTH_IN, 1.1 + (0.2 * len(ests) + 0.5) * len(structs)
+                                                       + 0.6), sharex=True, squeeze=False, layout="constrained")
+    cmap = colormaps["viridis"].with_extremes(bad="#DDDDDD")
+    norm = LogNorm(1e-4, 10)
+    table, grids = [], []
     for ax, s in zip(axes[:, 0], structs):
         piv = (p[p["cfg_structure.name"] == s].pivot_table(index="cfg_estimator.name", columns="name",
                                                            values="abs_rel_error", aggfunc="median")
                .reindex(index=ests, columns=pnames))
-        im = ax.imshow(np.clip(piv.to_numpy(float), 1e-4, 10), aspect="auto", cmap="viridis",
-                       norm=LogNorm(1e-4, 10))
+        vals = piv.to_numpy(float)
+        im = ax.imshow(np.clip(vals, 1e-4, 10), aspect="auto", cmap=cmap, norm=norm, interpolation="nearest")
         ax.set_yticks(range(len(ests)), ests)
         ax.set_xticks(range(len(pnames)), pnames, rotation=90)
-        ax.set_title(f"{s}: median |relative error| ({model}, noise {noise})")
-        for i in range(piv.shape[0]):
-            for j in range(piv.shape[1]):
-                v = piv.iat[i, j]
-                if np.isfinite(v):
-                    ax.text(j, i, f"{v:.2g}", ha="center", va="center", fontsize=5,
-                            color="white" if v < 0.03 else "black")
+        ax.set_ylabel("estimator")
+        ax.set_title(f"{s} samples")
+        grids.append((ax, vals))
         for e in ests:
             row = {"structure": s, "estimator": e}
             row.update({n: piv.loc[e, n] for n in pnames})
             table.append(row)
-    fig.colorbar(im, ax=axes[:, 0].tolist(), shrink=0.6, label="|estimate - truth| / |truth|")
+    axes[-1, 0].set_xlabel("coefficient")
+    fig.colorbar(im, ax=axes[:, 0].tolist(), shrink=min(1.0, 0.9 / len(structs) ** 0.5 + 0.1), extend="both",
+                 label="median |estimate - truth| / |truth| [-]")
+    grey = []
+    if any(np.isnan(v[:, [pnames.index(n) for n in zero]]).any() for _, v in grids if zero):
+        grey.append("truth 0")
+    if any(np.isnan(v[:, [j for j, n in enumerate(pnames) if n not in zero]]).any() for _, v in grids):
+        grey.append("no run")
+    sub = sampling_label(p)
+
+    def title(cells):
+        note = {2: "", 1: f"; cells: one significant digit, numbers in {name}.md", 0: f"; numbers in {name}.md"}
+        return _wrap(f"Median |relative error| per coefficient: {model}, noise {noise}" + (f", {sub}" if sub else "")
+                     + note[cells] + (f"; grey: {' or '.join(grey)}" if grey else ""))
+
+    fig.suptitle(title(2))  # before the cells are measured: the title takes its room from the panels
+    cells = 0
+    for digits in (2, 1):  # one significant digit where two do not fit; none where one does not
+        # every panel has the same cells: all are written or none
+        if all([annotate_cells(fig, ax, v, fmt=lambda x: short_number(x, digits), dark=lambda x: x < 0.03)
+                for ax, v in grids]):
+            cells = digits
+            break
+    fig.suptitle(title(cells))
     b.figure(fig, study, name, f"parameter drift heatmaps, estimator x parameter per structure ({model}, noise "
                                f"{noise})")
     b.table(pd.DataFrame(table), study, name, f"the drift heatmap's numbers ({model}, noise {noise})")
@@ -190,25 +250,31 @@ def drift_heatmaps(b: Builder, runs, params, study: str, model: str, noise: str,
 
 
 def fit_time_figure(b: Builder, runs, study: str):
+    """Median fit time per estimator (groups) and structure (bars, coloured and hatched by structure)."""
     r = runs[runs["t_fit"].notna()]
     if not len(r):
         return
     plt = _plt()
     ests = _order(r["cfg_estimator.name"], ESTIMATOR_ORDER)
-    fig, ax = plt.subplots(figsize=(6, 3))
+    fig, ax = plt.subplots(figsize=(min(PRINT_WIDTH_IN, 3.2 + 0.5 * len(ests)), 3.2), layout="constrained")
     structs = _order(r["cfg_structure.name"], STRUCTURE_ORDER)
     w = 0.8 / len(structs)
     rows = []
     for k, s in enumerate(structs):
+        st = structure_style(s)
         med = r[r["cfg_structure.name"] == s].groupby("cfg_estimator.name")["t_fit"].median().reindex(ests)
-        ax.bar(np.arange(len(ests)) + k * w, med.to_numpy(float), width=w, label=s)
+        ax.bar(np.arange(len(ests)) + k * w, med.to_numpy(float), width=w, label=s, color=st["color"],
+               hatch=st["hatch"], edgecolor="black", linewidth=0.5)
         rows += [{"structure": s, "estimator": e, "median_fit_s": med[e],
                   "runs": int(((r["cfg_structure.name"] == s) & (r["cfg_estimator.name"] == e)).sum())} for e in ests]
     ax.set_yscale("log")
-    ax.set_xticks(np.arange(len(ests)) + 0.4 - w / 2, ests, rotation=45)
+    ax.set_xticks(np.arange(len(ests)) + 0.4 - w / 2, ests, rotation=45, ha="right", rotation_mode="anchor")
+    ax.set_xlabel("estimator")
     ax.set_ylabel("median fit time [s]")
-    ax.legend(ncol=len(structs))
-    ax.set_title(f"{study}: fit time per estimator")
+    ax.legend(title="sample structure", loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    log_ticks(ax)
+    sub = sampling_label(r)
+    ax.set_title(_wrap(f"{study}: fit time per estimator" + (f" ({sub})" if sub else ""), 80))
     b.figure(fig, study, "fit_time", "median fit time per estimator and structure")
     b.table(pd.DataFrame(rows), study, "fit_time", "median fit time per estimator and structure")
 
@@ -251,56 +317,87 @@ def correlation_figure(b: Builder, runs, study: str, run: pd.Series, label: str)
     col = json.loads(raw.decode("utf-8"))
     plt = _plt()
     eqs = [e for e in ("X", "Y", "N") if e in col]
-    fig, axes = plt.subplots(1, len(eqs), figsize=(3.2 * len(eqs), 3.0), squeeze=False)
+    n = max(len(col[e]["names"]) for e in eqs)
+    side = min((PRINT_WIDTH_IN - 1.0) / len(eqs), 3.0)
+    fig, axes = plt.subplots(1, len(eqs), figsize=(min(PRINT_WIDTH_IN, side * len(eqs) + 1.0), side + 1.2 + 0.06 * n),
+                             squeeze=False, layout="constrained")
+    written = True
     for ax, e in zip(axes[0], eqs):
         C = np.array(col[e]["corr"], dtype=float)
         names = col[e]["names"]
-        im = ax.imshow(C, vmin=-1, vmax=1, cmap="RdBu_r")
+        im = ax.imshow(C, vmin=-1, vmax=1, cmap="RdBu_r", interpolation="nearest")
         ax.set_xticks(range(len(names)), names, rotation=90)
         ax.set_yticks(range(len(names)), names)
-        ax.set_title(f"{e}: cond(R) = {col[e]['cond_corr']:.3g}")
-        for i in range(len(names)):
-            for j in range(len(names)):
-                if np.isfinite(C[i, j]):
-                    ax.text(j, i, f"{C[i, j]:.2f}", ha="center", va="center", fontsize=5)
-    fig.colorbar(im, ax=axes[0].tolist(), shrink=0.7)
+        ax.set_xlabel("regressor")
+        ax.set_ylabel("regressor")
+        ax.set_title(f"{e} equation: cond(R) = {col[e]['cond_corr']:.3g}")
+        written = annotate_cells(fig, ax, C, fmt=lambda v: f"{v:.2f}" if np.isfinite(v) else "",
+                                 dark=lambda v: abs(v) > 0.6) and written
+    fig.colorbar(im, ax=axes[0].tolist(), shrink=0.8, label="correlation coefficient [-]")
+    fig.suptitle(_wrap(f"Regressor correlation matrices ({label})" + ("" if written else
+                                                                      "; numbers in the run's collinearity.json")))
     b.figure(fig, study, "correlation_matrices", f"regressor correlation matrices per equation ({label}; seed 000 "
                                                  "Fig. 6)")
 
 
-def validation_figure(b: Builder, study: str, entries: list, maneuver: str, name: str, what: str):
-    """Truth against the predictions of several runs on one validation manoeuvre (from the saved traces)."""
-    traces = [(lab, b.artefact_csv(rid, f"validation/{maneuver}.csv")) for lab, rid in entries]
-    lost = [lab for lab, t in traces if t is None]  # a prediction that diverged leaves no trace
-    traces = [(lab, t) for lab, t in traces if t is not None]
+def validation_figure(b: Builder, study: str, entries: list, maneuver: str, name: str, what: str, setup: str = ""):
+    """Truth against the predictions of several runs on one validation manoeuvre (from the saved traces).
+    ``entries``: (label, run_id, style) with style a dict of ``color``, ``marker``, ``ls`` (from
+    :func:`estimator_style` or :func:`structure_style`: the colour follows what the traces differ in); ``setup``
+    names what they share (model, noise, sampling interval), for the title. A channel no model predicts (a
+    Nomoto model's u and v stay at their initial values) is left out, and the title says so."""
+    entries = [e if len(e) == 3 else (e[0], e[1], {"color": TOL_MUTED[k % len(TOL_MUTED)]})
+               for k, e in enumerate(entries)]
+    traces = [(lab, b.artefact_csv(rid, f"validation/{maneuver}.csv"), st) for lab, rid, st in entries]
+    lost = [lab for lab, t, _ in traces if t is None]  # a prediction that diverged leaves no trace
+    traces = [(lab, t, st) for lab, t, st in traces if t is not None]
     if not traces:
         return
     plt = _plt()
     t0 = traces[0][1]
     chans = [c for c in ("u", "v", "r", "psi") if f"model_{c}" in t0]
+    held = [c for c in chans if not any(np.nanmax(t[f"model_{c}"].to_numpy(float)) > np.nanmin(t[f"model_{c}"].to_numpy(
+        float)) for _, t, _ in traces)]
+    chans = [c for c in chans if c not in held]
     turning = maneuver.startswith("turning")
-    n = len(chans) + (1 if turning else 0)
-    fig, axes = plt.subplots(n, 1, figsize=(6.5, 1.6 * n), squeeze=False)
+    fig = plt.figure(figsize=(PRINT_WIDTH_IN * 0.85, 1.45 * len(chans) + (2.6 if turning else 0) + 1.2),
+                     layout="constrained")
+    gs = fig.add_gridspec(len(chans) + (1 if turning else 0), 1,
+                          height_ratios=[1.0] * len(chans) + ([2.2] if turning else []))
+    axes = []
+    for k in range(len(chans)):
+        axes.append(fig.add_subplot(gs[k, 0], sharex=axes[0] if axes else None))
     scale = {"r": 180 / math.pi, "psi": 180 / math.pi}
     unit = {"u": "m/s", "v": "m/s", "r": "deg/s", "psi": "deg"}
-    for ax, c in zip(axes[:, 0], chans):
-        ax.plot(t0["time"], t0[f"truth_{c}"] * scale.get(c, 1), "k-", lw=1.4, label="truth")
-        for lab, t in traces:
-            ax.plot(t["time"], t[f"model_{c}"] * scale.get(c, 1), lw=0.9, label=lab)
+    for k, (ax, c) in enumerate(zip(axes, chans)):
+        ax.plot(t0["time"], t0[f"truth_{c}"] * scale.get(c, 1), label="truth", **TRUTH_STYLE)
+        for lab, t, st in traces:
+            ax.plot(t["time"], t[f"model_{c}"] * scale.get(c, 1), lw=1.1, color=st.get("color"),
+                    ls=st.get("ls", "-"), marker=st.get("marker"), markevery=max(1, len(t) // 12), ms=4, label=lab)
         ax.set_ylabel(f"{c} [{unit[c]}]")
-    axes[len(chans) - 1, 0].set_xlabel("time [s]")
-    axes[0, 0].legend(ncol=3)
+        if k < len(chans) - 1:
+            ax.tick_params(labelbottom=False)
+    axes[-1].set_xlabel("time [s]")
     if turning:
-        ax = axes[-1, 0]
-        ax.plot(t0["truth_y0"], t0["truth_x0"], "k-", lw=1.4)
-        for lab, t in traces:
+        ax = fig.add_subplot(gs[-1, 0])
+        ax.plot(t0["truth_y0"], t0["truth_x0"], **TRUTH_STYLE)
+        for lab, t, st in traces:
             if "model_y0" in t:
-                ax.plot(t["model_y0"], t["model_x0"], lw=0.9)
-        ax.set_aspect("equal")
+                ax.plot(t["model_y0"], t["model_x0"], lw=1.1, color=st.get("color"), ls=st.get("ls", "-"),
+                        marker=st.get("marker"), markevery=max(1, len(t) // 12), ms=4)
+        ax.set_aspect("equal", adjustable="datalim")
         ax.set_xlabel("y0 (east) [m]")
         ax.set_ylabel("x0 (north) [m]")
-    axes[0, 0].set_title(f"{maneuver}: predicted against simulated truth"
-                         + (f" (diverged, not shown: {', '.join(lost)})" if lost else ""))
+        ax.set_title("track")
+    h, lab = axes[0].get_legend_handles_labels()
+    fig.legend(h, lab, loc="outside lower center", ncol=min(len(lab), 4))
+    notes = []
+    if lost:
+        notes.append(f"diverged, not shown: {', '.join(lost)}")
+    if held:
+        notes.append(f"{', '.join(held)} not predicted by the model(s)")
+    fig.suptitle(_wrap(f"{maneuver}: predicted against the simulated truth" + (f" ({setup})" if setup else "")
+                       + ("; " + "; ".join(notes) if notes else "")))
     b.figure(fig, study, name, what)
 
 
@@ -324,59 +421,98 @@ def rmse_cc_table(b: Builder, runs, study: str, group, maneuvers, channels=("u",
 
 
 def lcurve_figure(b: Builder, study: str, entries: list, eq: str = "N"):
-    """L-curves of truncated LS-SVM runs (artefact <eq>/lcurve.csv) with the rank each chose."""
+    """L-curves of truncated LS-SVM runs (artefact <eq>/lcurve.csv) with the rank each chose (ringed)."""
     curves = [(lab, b.artefact_csv(run["run_id"], f"{eq}/lcurve.csv"), run.get(f"m_est_{eq}_rank"))
               for lab, run in entries]
     curves = [c for c in curves if c[1] is not None]
     if not curves:
         return
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(4.5, 3.5))
-    for lab, lc, rank in curves:
+    fig, ax = plt.subplots(figsize=(PRINT_WIDTH_IN * 0.6, 3.6), layout="constrained")
+    markers = ["o", "s", "^", "v", "D"]
+    for k, (lab, lc, rank) in enumerate(curves):
         ok = rank is not None and np.isfinite(rank)
-        ax.loglog(lc["residual_norm"], lc["solution_norm"], marker="o", label=f"{lab} (rank {rank:g})" if ok else lab)
+        colour = TOL_MUTED[k % len(TOL_MUTED)]
+        ax.loglog(lc["residual_norm"], lc["solution_norm"], marker=markers[k % 5], color=colour, lw=1.1,
+                  label=f"{lab} (rank {rank:g})" if ok else lab)
+        if ok:
+            c = lc[lc["rank"] == rank]
+            ax.plot(c["residual_norm"], c["solution_norm"], "o", ms=12, mfc="none", mec=colour, mew=1.2)
+        # ranks whose points nearly coincide (within 0.03 decades) share one label, '1, 2'
+        groups = []
         for _, row in lc.iterrows():
-            ax.annotate(str(int(row["rank"])), (row["residual_norm"], row["solution_norm"]), fontsize=6)
-    ax.set_xlabel("residual norm")
-    ax.set_ylabel("solution norm (standardised columns)")
-    ax.legend()
-    ax.set_title("truncated LS-SVM: L-curve (labels: rank r)")
+            xy = (float(row["residual_norm"]), float(row["solution_norm"]))
+            near = [g for g in groups if all(abs(math.log10(a / b)) < 0.03 for a, b in zip(g[0], xy) if a > 0 and
+                                             b > 0)]
+            if near:
+                near[0][1].append(int(row["rank"]))
+            else:
+                groups.append((xy, [int(row["rank"])]))
+        for xy, ranks in groups:
+            ax.annotate(", ".join(str(k) for k in sorted(ranks)), xy, fontsize=8, xytext=(4, 3),
+                        textcoords="offset points")
+    ax.set_xlabel("residual norm ||y - Z w|| [units of y]")
+    ax.set_ylabel("solution norm ||w|| (standardised) [units of y]")
+    log_ticks(ax, "x")
+    log_ticks(ax, "y")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.22))
+    ax.set_title(_wrap(f"Truncated LS-SVM, {eq} equation: L-curve (numbers: rank kept; ringed: the corner chosen)",
+                       60))
     b.figure(fig, study, "lcurve", "the L-curve of the truncated LS-SVM (seed 001 Sec. 3) and the rank chosen at its "
              "corner")
 
 
-def convergence_figure(b: Builder, study: str, run, params, name: str, label: str):
-    """Every coefficient of an incremental LS-SVM run against the number of samples, over its truth."""
+def convergence_figure(b: Builder, study: str, run, params, name: str, label: str, title: str | None = None):
+    """Every coefficient of an incremental LS-SVM run against the number of samples, over its truth. ``label``
+    describes the output (README), ``title`` (default: the run's set-up) heads the figure."""
     plt = _plt()
     tru = params[params["run_id"] == run["run_id"]].set_index("name")["truth"]
     eqs = [e for e in ("X", "Y", "N") if b.artefact(run["run_id"], f"{e}/convergence.csv") is not None]
     if not eqs:
         return
-    fig, axes = plt.subplots(len(eqs), 1, figsize=(6.5, 2.0 * len(eqs)), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(len(eqs), 1, figsize=(PRINT_WIDTH_IN, 2.0 * len(eqs) + 0.7), sharex=True,
+                             squeeze=False, layout="constrained")
+    markers = ["o", "s", "^", "v", "D", "<", ">", "P", "X"]
     for ax, eq in zip(axes[:, 0], eqs):
         cv = b.artefact_csv(run["run_id"], f"{eq}/convergence.csv")
         by_truth = any(c in tru for c in cv.columns[1:])
-        for c in cv.columns[1:]:
-            if c == "intercept":
-                continue
+        cols = [c for c in cv.columns[1:] if c != "intercept"]
+        every = max(1, len(cv) // 10)
+        for k, c in enumerate(cols):
+            st = {"color": TOL_MUTED[k % len(TOL_MUTED)], "marker": markers[k % len(markers)], "markevery": every,
+                  "ms": 4, "lw": 1.0}
             ref = tru.get(c) if by_truth else cv[c].iloc[-1]  # regression coefficients (Nomoto): / final value
             if ref is not None and np.isfinite(ref) and ref != 0:
-                ax.plot(cv.iloc[:, 0], cv[c] / ref, lw=0.9, label=c)
+                ax.plot(cv.iloc[:, 0], cv[c] / ref, label=c, **st)
             elif c in tru:
-                ax.plot(cv.iloc[:, 0], cv[c], lw=0.9, ls=":", label=f"{c} (truth 0)")
+                ax.plot(cv.iloc[:, 0], cv[c], ls=":", label=f"{c} (truth 0: the estimate)", **st)
         ax.axhline(1.0, color="k", lw=0.8)
         ax.set_ylim(-1, 3)
-        ax.set_ylabel(f"{eq}: estimate / {'truth' if by_truth else 'final value'}")
-        ax.legend(ncol=4, fontsize=5)
-    axes[-1, 0].set_xlabel("samples used")
-    axes[0, 0].set_title(f"incremental LS-SVM convergence ({label})")
+        ax.set_ylabel(f"{eq}: estimate / {'truth' if by_truth else 'final value'} [-]")
+        ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), ncol=1 if len(cols) <= 8 else 2)
+    axes[-1, 0].set_xlabel("samples used [-]")
+    fig.suptitle(_wrap(f"Incremental LS-SVM: each coefficient against the samples used ({title or _run_setup(run)}; "
+                       "axis cut at -1 and 3)"))
     b.figure(fig, study, name, f"convergence of every coefficient against the number of samples, incremental LS-SVM "
              f"({label})")
 
 
+def _run_setup(run) -> str:
+    """What one run was: model, structure, noise, sampling interval and dataset seed, for a figure's title."""
+    parts = [f"{run.get('cfg_model.name')}", f"{run.get('cfg_structure.name')}", f"noise {run.get('cfg_noise.name')}"]
+    sub = sampling_label(pd.DataFrame([run]))
+    if sub:
+        parts.append(sub)
+    if "cfg_seed" in run and pd.notna(run.get("cfg_seed")):
+        parts.append(f"dataset seed {int(run['cfg_seed'])}")
+    return ", ".join(parts)
+
+
 def emcee_figures(b: Builder, study: str, run, params, maneuver: str = "zigzag_35_35"):
-    """Corner plot of an emcee run's chain (model parameters only) and its posterior-predictive band."""
+    """Corner plot of an emcee run's chain (model parameters only) and its posterior-predictive band, with the
+    band's width drawn again around the posterior median (on the scale of a manoeuvre a narrow band is invisible)."""
     plt = _plt()
+    setup = _run_setup(run)
     raw = b.artefact(run["run_id"], "chain.npz")
     if raw is not None:
         import corner
@@ -387,25 +523,48 @@ def emcee_figures(b: Builder, study: str, run, params, maneuver: str = "zigzag_3
         k = min(k, 6)  # a readable grid: the first six model parameters
         flat = z["chain"].reshape(-1, z["chain"].shape[-1])[:, :k]
         tru = params[params["run_id"] == run["run_id"]].set_index("name")["truth"]
-        fig = corner.corner(flat, labels=names[:k], truths=[tru.get(n, np.nan) for n in names[:k]],
-                            quantiles=[0.05, 0.5, 0.95], show_titles=True, title_fmt=".4g", bins=30,
-                            plot_datapoints=False, fill_contours=True)
+        size = min(PRINT_WIDTH_IN, 1.9 * k + 1.2)
+        fig = plt.figure(figsize=(size, size))
+        corner.corner(flat, fig=fig, labels=[param_label(n) for n in names[:k]],
+                      truths=[tru.get(n, np.nan) for n in names[:k]], truth_color=OKABE_BLUE,
+                      quantiles=[0.05, 0.5, 0.95], show_titles=True, title_fmt=".4g", bins=30,
+                      plot_datapoints=False, fill_contours=True, max_n_ticks=3,
+                      label_kwargs={"fontsize": 9}, title_kwargs={"fontsize": 8})
+        for ax in fig.axes:
+            ax.tick_params(labelsize=8)
+        fig.subplots_adjust(left=1.0 / size, bottom=1.0 / size, right=1 - 0.15 / size, top=1 - 0.85 / size,
+                            wspace=0.08, hspace=0.08)
+        fig.suptitle(_wrap(f"emcee posterior ({setup}); blue: truth; dashed: 5, 50, 95 % quantiles",
+                           int(size * 13)))
         b.figure(fig, study, "corner", f"emcee posterior of the model parameters ({run['cfg_model.name']}, "
                  f"{run['cfg_structure.name']}; truth lines, 5/50/95 % quantiles)")
     band = b.artefact_csv(run["run_id"], f"validation/{maneuver}_band.csv")
     if band is not None:
         chans = [c for c in ("u", "v", "r", "psi") if f"q50_{c}" in band]
-        fig, axes = plt.subplots(len(chans), 1, figsize=(6.5, 2.0 * len(chans)), sharex=True, squeeze=False)
-        for ax, c in zip(axes[:, 0], chans):
+        fig, axes = plt.subplots(2 * len(chans), 1, figsize=(PRINT_WIDTH_IN * 0.85, 2.6 * len(chans) + 1.0),
+                                 sharex=True, squeeze=False, layout="constrained",
+                                 gridspec_kw={"height_ratios": [1.6, 1.0] * len(chans)})
+        fill = {"color": OKABE_BLUE, "alpha": 0.3, "edgecolor": OKABE_BLUE, "linewidth": 0.6}
+        for k, c in enumerate(chans):
             f, u = (180 / math.pi, "deg/s" if c == "r" else "deg") if c in ("r", "psi") else (1.0, "m/s")
-            ax.fill_between(band["time"], band[f"q05_{c}"] * f, band[f"q95_{c}"] * f, alpha=0.4,
-                            label="90 % posterior-predictive band")
-            ax.plot(band["time"], band[f"q50_{c}"] * f, lw=0.9, label="median")
-            ax.plot(band["time"], band[f"truth_{c}"] * f, "k--", lw=0.9, label="truth")
+            ax, dev = axes[2 * k, 0], axes[2 * k + 1, 0]
+            t, q05, q50, q95 = band["time"], band[f"q05_{c}"] * f, band[f"q50_{c}"] * f, band[f"q95_{c}"] * f
+            truth = band[f"truth_{c}"] * f
+            ax.fill_between(t, q05, q95, label="90 % posterior-predictive band", **fill)
+            ax.plot(t, q50, color=OKABE_BLUE, lw=1.2, label="posterior median")
+            ax.plot(t, truth, color="black", ls="--", lw=1.1, label="truth")
             ax.set_ylabel(f"{c} [{u}]")
-        axes[0, 0].legend()
+            dev.fill_between(t, q05 - q50, q95 - q50, **fill)
+            dev.plot(t, truth - q50, color="black", ls="--", lw=1.1)
+            dev.axhline(0.0, color=OKABE_BLUE, lw=1.0)
+            dev.set_ylabel(f"{c} - median [{u}]")
+        for ax in axes[:-1, 0]:
+            ax.tick_params(labelbottom=False)
         axes[-1, 0].set_xlabel("time [s]")
-        axes[0, 0].set_title(f"{maneuver}: posterior-predictive band ({int(band['draws'].iloc[0])} draws)")
+        h, lab = axes[0, 0].get_legend_handles_labels()
+        fig.legend(h, lab, loc="outside lower center", ncol=3)
+        fig.suptitle(_wrap(f"{maneuver}: posterior-predictive band of emcee ({setup}; {int(band['draws'].iloc[0])} "
+                           "draws); below each channel: the band and the truth less the posterior median"))
         b.figure(fig, study, f"posterior_band_{maneuver}", f"posterior-predictive band of the {maneuver} (emcee, "
                  f"{run['cfg_structure.name']})")
 

@@ -27,6 +27,7 @@ def build(b: Builder, runs, params, claims):
     if cov:
         b.table(pd.DataFrame(cov), s, "coverage", "coverage of emcee's 90 % intervals over the datasets (seeds), per "
                 "likelihood (output error / regression on central differences) and noise (outputs only / rudder too)")
+    # the figures show one dataset, chosen by name: the lowest seed (named in their titles)
     run = _first(r, **{"cfg_structure.name": "output_error", "cfg_noise.name": "low_outputs"})
     if run is not None:
         emcee_figures(b, s, run, p)

@@ -7,8 +7,8 @@ from __future__ import annotations
 import pandas as pd
 
 from ..figures.plots import (
-    ESTIMATOR_ORDER, STRUCTURE_ORDER, NOISE_ORDER, _plt, _order, Builder, _hT, fit_time_figure,
-    collinearity_tables, _pct, _verdict,
+    ESTIMATOR_ORDER, STRUCTURE_ORDER, NOISE_ORDER, PRINT_WIDTH_IN, _plt, _order, _wrap, Builder, _hT,
+    estimator_style, fit_time_figure, collinearity_tables, log_ticks, sampling_label, _pct, _verdict,
 )
 
 NAME = "grand"
@@ -21,25 +21,38 @@ def build(b: Builder, runs, params, claims, s="grand"):
     p = p[p["truth_kind"] == "exact"].copy()
     p["hT"] = p["cfg_depth.h_T"].map(_hT)
     tabs = {}
+    sub = sampling_label(p)
     for axis, col, order in (("noise", "cfg_noise.name", NOISE_ORDER), ("hT", "hT", ["deep", "5.6", "2.9", "1.46",
                                                                                      "1.32"])):
         vals = _order(p[col], order)
         if len(vals) < 2:
             continue
         structs = _order(p["cfg_structure.name"], STRUCTURE_ORDER)
-        fig, axes = plt.subplots(1, len(structs), figsize=(3.3 * len(structs), 3), sharey=True, squeeze=False)
+        fig, axes = plt.subplots(1, len(structs), figsize=(PRINT_WIDTH_IN, 3.6), sharey=True, squeeze=False,
+                                 layout="constrained")
         rows = []
         for ax, st in zip(axes[0], structs):
             d = p[p["cfg_structure.name"] == st]
             for e in _order(d["cfg_estimator.name"], ESTIMATOR_ORDER):
                 med = d[d["cfg_estimator.name"] == e].groupby(col)["abs_rel_error"].median().reindex(vals)
-                ax.plot(vals, med.to_numpy(float), marker="o", lw=0.9, label=e)
+                ax.plot(vals, med.to_numpy(float), lw=1.0, ms=5, label=e, **estimator_style(e))
                 rows += [{"structure": st, "estimator": e, axis: v, "median_abs_rel_error": med[v]} for v in vals]
             ax.set_yscale("log")
-            ax.set_title(st)
-            ax.set_xlabel("noise level" if axis == "noise" else "h/T")
-        axes[0, 0].set_ylabel("median |relative error|")
-        axes[0, -1].legend(fontsize=5)
+            ax.set_title(f"{st} samples")
+            ax.set_xlabel("noise level" if axis == "noise" else "h/T [-]")
+        log_ticks(axes[0, 0])
+        axes[0, 0].set_ylabel("median |relative error| [-]")
+        handles = {}
+        for ax in axes[0]:
+            for h, lab in zip(*ax.get_legend_handles_labels()):
+                handles.setdefault(lab, h)
+        ests = _order(list(handles), ESTIMATOR_ORDER)
+        fig.legend([handles[e] for e in ests], ests, loc="outside lower center", ncol=min(len(ests), 6),
+                   title="estimator")
+        pooled = "vessels and depths" if axis == "noise" else "vessels and noise levels"
+        fig.suptitle(_wrap(f"Median |relative error| of the exact coefficients against the "
+                           f"{'noise level' if axis == 'noise' else 'water depth h/T'} (pooled over {pooled}; "
+                           f"{sub or 'each vessel at its default sampling interval'})"))
         b.figure(fig, s, f"drift_vs_{axis}", f"median parameter drift against the {axis} per estimator and structure "
                  "(all vessels)")
         tabs[axis] = pd.DataFrame(rows)

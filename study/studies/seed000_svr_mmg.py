@@ -10,7 +10,8 @@ from scipy import stats
 
 from ..figures.plots import (
     EQ_ORDER, STRUCTURE_ORDER, NOISE_ORDER, _order, Builder, _first, drift_heatmaps, fit_time_figure,
-    collinearity_tables, vif_table, correlation_figure, validation_figure, rmse_cc_table, finest,
+    collinearity_tables, vif_table, correlation_figure, validation_figure, rmse_cc_table, finest, sampling_label,
+    structure_style,
 )
 from ..figures.verdicts import compare, explain, sensitivity, settle, summary
 
@@ -47,7 +48,7 @@ def build(b: Builder, runs, params, claims):
     run = _first(r, **{"cfg_model.name": "mmg_simplified", "cfg_estimator.name": "svr_eps",
                        "cfg_structure.name": "euler", "cfg_noise.name": "none"})
     if run is not None:
-        correlation_figure(b, r, s, run, "mmg_simplified, euler rows, noise-free")
+        correlation_figure(b, r, s, run, f"mmg_simplified, euler rows, noise-free, {sampling_label(r)}")
     rmse_cc_table(b, r[r["cfg_model.name"] == "mmg_simplified"], s,
                   ("cfg_estimator.name", "cfg_structure.name", "cfg_noise.name"),
                   ("zigzag_20_20", "zigzag_35_35", "turning_35"))
@@ -60,10 +61,11 @@ def build(b: Builder, runs, params, claims):
             run = _first(r, **{"cfg_model.name": "mmg_simplified", "cfg_estimator.name": "svr_eps",
                                "cfg_structure.name": st, "cfg_noise.name": nz})
             if run is not None:
-                ent.append((lab, run["run_id"]))
+                ent.append((lab, run["run_id"], structure_style(st)))
         for m, fig_no in (("zigzag_20_20", 4), ("zigzag_35_35", 7), ("turning_35", 9)):
             validation_figure(b, s, ent, m, f"validation_{m}_{nz}", f"seed 000 Fig. {fig_no}: {m} predicted by the "
-                              f"SVR models identified at noise {nz} against the truth")
+                              f"SVR models identified at noise {nz} against the truth",
+                              setup=f"mmg_simplified by epsilon-SVR, noise {nz}, {sampling_label(r)}")
     # Lasso term selection on the full model (seed 000 Sec. 2.3)
     las = p[(p["cfg_model.name"] == "usv_full") & (p["cfg_estimator.name"] == "lasso")]
     if len(las):

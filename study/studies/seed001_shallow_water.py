@@ -9,7 +9,8 @@ import numpy as np
 import pandas as pd
 
 from ..figures.plots import (
-    ESTIMATOR_ORDER, NOISE_ORDER, _plt, _order, Builder, _hT, _first, finest, fit_time_figure, lcurve_figure,
+    ESTIMATOR_ORDER, NOISE_ORDER, PRINT_WIDTH_IN, TRUTH_STYLE, _plt, _order, _wrap, Builder, _hT, _first, at_sampling,
+    estimator_style, fit_time_figure, lcurve_figure, log_ticks, sampling_label,
 )
 from ..figures.verdicts import explain, sensitivity, summary
 
@@ -32,44 +33,60 @@ def build(b: Builder, runs, params, claims):
         m = p["name"] == k
         p.loc[m, "estimate_nd"] = p.loc[m, "estimate"] * f[m]
         p.loc[m, "truth_nd"] = p.loc[m, "truth"] * f[m]
-    # figures at the finest sampling interval swept (named in their captions); the claims weigh every interval
+    # figures at the finer of the two sampling intervals swept (about 0.1 s, named in their titles), selected by
+    # the interval asked for: each vessel and speed decimates it to its own step; the claims weigh every interval
     r_all, p_all = r, p
-    r, p = finest(r_all)[0], finest(p_all)[0]
-    dt = p["m_sample_dt"].dropna()
-    at = f", sampled at {dt.min():g}-{dt.max():g} s ({p['m_sample_dt_LU'].min():.3g} L/U0)" if len(dt) else ""
+    r, p = at_sampling(r_all), at_sampling(p_all)
+    sub = sampling_label(p)
+    at = f", {sub}" if sub else ""
     order = ["1.32", "1.46", "2.9", "5.6", "deep"]
     rows = []
+    from matplotlib.lines import Line2D
+
     for model, names in (("nomoto1_nl", ["K", "T"]), ("nomoto2_nl", ["K", "T1", "T3"])):
         q = p[(p["cfg_model.name"] == model) & (p["cfg_vessel.name"] == "kcs")]
         if not len(q):
             continue
-        speeds = sorted(q["cfg_vessel.operation.U0"].dropna().unique())
+        speeds = sorted(q["cfg_vessel.operation.U0"].dropna().unique(), reverse=True)
         noises = _order(q["cfg_noise.name"], NOISE_ORDER)
-        fig, axes = plt.subplots(len(names), len(noises), figsize=(3.2 * len(noises), 2.5 * len(names)),
-                                 squeeze=False, constrained_layout=True)
+        ests = _order(q["cfg_estimator.name"], ESTIMATOR_ORDER)
+        styles = dict(zip(speeds, ("-", "--", ":")))
+        fig, axes = plt.subplots(len(names), len(noises), figsize=(PRINT_WIDTH_IN, 2.1 * len(names) + 1.4),
+                                 squeeze=False, sharex=True, layout="constrained")
         for j, nz in enumerate(noises):
             for i, n in enumerate(names):
                 ax = axes[i, j]
-                for sp, ls_ in zip(speeds, ("-", "--")):
+                for sp in speeds:
+                    ls_ = styles[sp]
                     d = q[(q["name"] == n) & (q["cfg_noise.name"] == nz) & (q["cfg_vessel.operation.U0"] == sp)]
                     tru = d.groupby("hT")["truth_nd"].first().reindex(order)
-                    ax.plot(range(len(order)), tru.to_numpy(float), "k" + ls_, lw=2, label=f"truth, U0 {sp:g}")
-                    for e in _order(d["cfg_estimator.name"], ESTIMATOR_ORDER):
+                    ax.plot(range(len(order)), tru.to_numpy(float), ls=ls_, **{**TRUTH_STYLE, "lw": 2.0})
+                    for e in ests:
                         de = d[d["cfg_estimator.name"] == e].groupby("hT")["estimate_nd"].median().reindex(order)
-                        ax.plot(range(len(order)), de.to_numpy(float), ls_, marker="o", ms=3, lw=0.8,
-                                label=f"{e}, U0 {sp:g}")
+                        ax.plot(range(len(order)), de.to_numpy(float), ls=ls_, ms=4, lw=0.9, **estimator_style(e))
                         for h in order:
                             rows.append({"model": model, "noise": nz, "U0": sp, "h/T": h, "parameter": n + "'",
                                          "estimator": e, "estimate": de.get(h), "truth": tru.get(h)})
                 ax.set_xticks(range(len(order)), order)
-                ax.set_title(f"{n}' ({model}), noise {nz}")
-                if n == "K":
+                ax.set_title(f"{n}', noise {nz}")
+                # a log axis where every value is positive; symmetric-log where estimates change sign (the
+                # second-order model's K', T1', T3' reach hundreds, of either sign, at some depths)
+                y = np.concatenate([ln.get_ydata() for ln in ax.get_lines()]).astype(float)
+                if (y[np.isfinite(y)] > 0).all():
+                    ax.set_yscale("log")
+                    log_ticks(ax)
+                else:
                     ax.set_yscale("symlog", linthresh=1.0)
-                if j == 0:
-                    ax.set_ylabel(f"{n}'")
+                ax.set_ylabel(f"{n}' [-]")
                 if i == len(names) - 1:
-                    ax.set_xlabel("h/T")
-        axes[0, -1].legend(fontsize=5, ncol=1, loc="best")
+                    ax.set_xlabel("h/T [-]")
+        handles = ([Line2D([], [], ms=5, lw=0.9, label=e, **estimator_style(e)) for e in ests]
+                   + [Line2D([], [], label="truth (derived)", **TRUTH_STYLE)]
+                   + [Line2D([], [], color="grey", ls=styles[sp], label=f"U0 = {sp:g} m/s") for sp in speeds])
+        fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 4))
+        structs = ", ".join(sorted(q["cfg_structure.name"].unique()))
+        fig.suptitle(_wrap(f"KCS, {model}: non-dimensional Nomoto parameters against h/T (median over {structs} "
+                           f"rows{at}; K' = K L/U0, T' = T U0/L)"))
         b.figure(fig, s, f"KT_vs_hT_{model}", f"non-dimensional Nomoto parameters against h/T per estimator and "
                  f"speed ({model}; black: derived truth{at})")
     if rows:
@@ -78,30 +95,41 @@ def build(b: Builder, runs, params, claims):
     # drift against the noise level per estimator
     q = p[p["truth_kind"] == "derived"]
     if len(q):
-        fig, axes = plt.subplots(1, 2, figsize=(8, 3))
+        models = [m for m in ("nomoto1_nl", "nomoto2_nl") if m in set(q["cfg_model.name"])]
+        fig, axes = plt.subplots(1, len(models), figsize=(PRINT_WIDTH_IN, 3.4), squeeze=False,
+                                 layout="constrained")
         tab = []
-        for ax, model in zip(axes, ("nomoto1_nl", "nomoto2_nl")):
+        for ax, model in zip(axes[0], models):
             d = q[q["cfg_model.name"] == model]
             noises = _order(d["cfg_noise.name"], NOISE_ORDER)
             for e in _order(d["cfg_estimator.name"], ESTIMATOR_ORDER):
                 med = d[d["cfg_estimator.name"] == e].groupby("cfg_noise.name")["abs_rel_error"].median().reindex(
                     noises)
-                ax.plot(noises, med.to_numpy(float), marker="o", label=e)
+                ax.plot(noises, med.to_numpy(float), lw=1.0, ms=5, label=e, **estimator_style(e))
                 tab += [{"model": model, "estimator": e, "noise": nz, "median_abs_rel_error": med[nz]}
                         for nz in noises]
             ax.set_yscale("log")
-            ax.set_title(f"{model}: median |relative error| of the Nomoto parameters")
-            ax.set_xlabel("noise")
-        axes[0].legend()
+            log_ticks(ax)
+            ax.set_title(f"{model}")
+            ax.set_xlabel("noise level")
+            ax.set_ylabel("median |relative error| [-]")
+        h, lab = axes[0, 0].get_legend_handles_labels()
+        fig.legend(h, lab, loc="outside right center", title="estimator")
+        fig.suptitle(_wrap("KCS: median |relative error| of the Nomoto parameters against the derived truth (pooled "
+                           f"over depths, speeds and structures{at})", 90))
         b.figure(fig, s, "drift_vs_noise", f"median drift of the Nomoto parameters against the noise level{at}")
         b.table(pd.DataFrame(tab), s, "drift_vs_noise", f"median drift of the Nomoto parameters against noise{at}")
-    # the L-curve of the truncated LS-SVM
+    # the L-curve of the truncated LS-SVM: KCS at its service speed in deep water, central differences
     ent = []
+    kcs = r[(r["cfg_vessel.name"] == "kcs") & r["cfg_depth.h_T"].isna()]
+    if len(kcs):
+        kcs = kcs[kcs["cfg_vessel.operation.U0"] == kcs["cfg_vessel.operation.U0"].max()]
     for nz in ("none", "medium"):
-        run = _first(r, **{"cfg_estimator.name": "tlssvm", "cfg_model.name": "nomoto2_nl", "cfg_noise.name": nz,
-                           "cfg_vessel.name": "kcs"})
+        run = _first(kcs, **{"cfg_estimator.name": "tlssvm", "cfg_model.name": "nomoto2_nl", "cfg_noise.name": nz,
+                             "cfg_structure.name": "central"})
         if run is not None:
-            ent.append((f"KCS, nomoto2_nl, h/T {_hT(run['cfg_depth.h_T'])}, noise {nz}", run))
+            ent.append((f"KCS, nomoto2_nl, deep, U0 {run['cfg_vessel.operation.U0']:g} m/s, central, noise {nz}",
+                        run))
     lcurve_figure(b, s, ent)
     fit_time_figure(b, r, s)
     claims.extend(claim(b, r_all, p_all))

@@ -10,8 +10,8 @@ import numpy as np
 import pandas as pd
 
 from ..figures.plots import (
-    STRUCTURE_ORDER, NOISE_ORDER, _order, Builder, _first, drift_heatmaps, fit_time_figure,
-    collinearity_tables, convergence_figure,
+    STRUCTURE_ORDER, NOISE_ORDER, _order, Builder, _first, at_sampling, drift_heatmaps, fit_time_figure,
+    collinearity_tables, convergence_figure, sampling_label,
 )
 
 NAME = "seed003_online_auv"
@@ -23,9 +23,10 @@ def build(b: Builder, runs, params, claims):
     r_all, p_all = runs[runs["cfg_study"] == s], params[params["cfg_study"] == s]
     # the figures at the seed's sampling interval scaled to this AUV (the coarser of the two swept); the claim
     # and its table weigh the other
-    r, p = _at_seed_interval(r_all), _at_seed_interval(p_all)
+    r, p = at_sampling(r_all, "coarsest"), at_sampling(p_all, "coarsest")
     dt = r["m_sample_dt"].dropna().iloc[0] if "m_sample_dt" in r and r["m_sample_dt"].notna().any() else None
-    at = f", sampled at {dt:g} s" if dt else ""
+    at = f", sampled at {dt:g} s" if dt else ""  # the tables' captions, as before
+    sub = sampling_label(r)
     for noise in _order(r["cfg_noise.name"], NOISE_ORDER):
         drift_heatmaps(b, r, p, s, "auv", noise, f"drift_heatmap_{noise}")
     # online convergence against the number of samples (Figures 3-8)
@@ -34,7 +35,8 @@ def build(b: Builder, runs, params, claims):
             run = _first(r, **{"cfg_estimator.name": "lssvm_online", "cfg_structure.name": st, "cfg_noise.name": nz})
             if run is not None:
                 convergence_figure(b, s, run, p, f"online_convergence_{st}_{nz}", f"{st} samples, noise {nz}{at}; "
-                                   "seed 003 Figs. 3-8")
+                                   "seed 003 Figs. 3-8", title=f"auv, {st} samples, noise {nz}, {sub}, the seed's "
+                                   "interval scaled to this AUV; seed 003 Figs. 3-8")
     # difference (central) against integral
     d = p[p["truth_kind"] == "exact"]
     tab = d.pivot_table(index=["cfg_estimator.name", "cfg_noise.name"], columns="cfg_structure.name",
@@ -47,12 +49,6 @@ def build(b: Builder, runs, params, claims):
     collinearity_tables(b, r, s)
     fit_time_figure(b, r, s)
     claims.extend(claim(b, r_all, p_all))
-
-
-def _at_seed_interval(df: pd.DataFrame) -> pd.DataFrame:
-    if "m_sample_dt_LU" not in df or not df["m_sample_dt_LU"].notna().any():
-        return df
-    return df[df["m_sample_dt_LU"] == df["m_sample_dt_LU"].max()]
 
 
 #: the truth-based band: within 10 % of the truth, or (whichever is wider) an error that moves its equation by

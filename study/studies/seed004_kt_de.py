@@ -8,7 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from ..figures.plots import _plt, Builder, _first, finest, fit_time_figure, validation_figure
+from ..figures.plots import (
+    PRINT_WIDTH_IN, _plt, _wrap, Builder, _first, finest, fit_time_figure, log_ticks, sampling_label, structure_style,
+    validation_figure,
+)
 from ..figures.verdicts import compare, describe, explain, sensitivity, summary
 
 NAME = "seed004_kt_de"
@@ -21,7 +24,8 @@ def build(b: Builder, runs, params, claims):
     plt = _plt()
     pf = finest(p)[0]  # the figure at the finest sampling interval; the claim's table has the others
     dt_s = pf["m_sample_dt"].dropna()
-    at = f" (sampled at {dt_s.iloc[0]:g} s)" if len(dt_s) else ""
+    at = f" (sampled at {dt_s.iloc[0]:g} s)" if len(dt_s) else ""  # the outputs' captions, as before
+    sub = sampling_label(pf)
     tab = (pf.groupby(["cfg_vessel.name", "cfg_model.name", "cfg_maneuvers.name", "cfg_noise.name",
                        "cfg_structure.name"])["abs_rel_error"].max().unstack("cfg_structure.name").reset_index())
     if len(tab):
@@ -30,22 +34,39 @@ def build(b: Builder, runs, params, claims):
                                     "cfg_maneuvers.name": "records", "cfg_noise.name": "noise"}), s,
                 "difference_vs_integral", "largest |relative error| of the KT parameters: DE by output error on the "
                 f"heading ('integral') against central differences of the heading{at}")
-        fig, axes = plt.subplots(1, 2, figsize=(10, 4.4), sharey=True, layout="constrained")
-        for ax, model in zip(axes, ("nomoto1_nl", "nomoto2_nl")):
-            d = tab[tab["cfg_model.name"] == model] if "cfg_model.name" in tab else tab[tab["model"] == model]
-            d = d.rename(columns={"cfg_vessel.name": "vessel", "cfg_maneuvers.name": "records",
-                                  "cfg_noise.name": "noise"})
-            labels = [f"{v} {'x1' if m.endswith('_single') else 'x2'} {n}"
-                      for v, m, n in zip(d["vessel"], d["records"], d["noise"])]
+        kinds = pf.groupby(["cfg_vessel.name", "cfg_model.name"])["truth_kind"].first()
+        models = [m for m in ("nomoto1_nl", "nomoto2_nl") if m in set(tab["cfg_model.name"])]
+        fig, axes = plt.subplots(len(models), 1, figsize=(PRINT_WIDTH_IN, 3.3 * len(models) + 0.8), squeeze=False,
+                                 layout="constrained")
+        from matplotlib.transforms import blended_transform_factory
+
+        for ax, model in zip(axes[:, 0], models):
+            d = tab[tab["cfg_model.name"] == model]
+            labels = [f"{'1 record' if m.endswith('_single') else '2 records'}, {n}"
+                      for m, n in zip(d["cfg_maneuvers.name"], d["cfg_noise.name"])]
             x = np.arange(len(d))
             for k, st in enumerate(("central", "output_error")):
                 if st in d:
-                    ax.bar(x + 0.4 * k, d[st].to_numpy(float), width=0.4, label=st)
-            ax.set_xticks(x + 0.2, labels, rotation=90, fontsize=6)
+                    sty = structure_style(st)
+                    ax.bar(x + 0.4 * k, d[st].to_numpy(float), width=0.4, label=st, color=sty["color"],
+                           hatch=sty["hatch"], edgecolor="black", linewidth=0.5)
+            ax.set_xticks(x + 0.2, labels, rotation=90)
             ax.set_yscale("log")
-            ax.set_title(model)
-        axes[0].set_ylabel("largest |relative error|")
-        axes[0].legend()
+            log_ticks(ax)
+            ax.set_ylabel("largest |relative error| [-]")
+            ax.set_xlabel("records and noise level")
+            ax.set_title(f"{model}", pad=16)
+            tr = blended_transform_factory(ax.transData, ax.transAxes)
+            vessels = list(dict.fromkeys(d["cfg_vessel.name"]))
+            for v in vessels:
+                idx = np.flatnonzero(d["cfg_vessel.name"].to_numpy() == v)
+                ax.text(idx.mean() + 0.2, 1.01, f"{v} ({kinds.get((v, model), '?')} truth)", transform=tr,
+                        ha="center", va="bottom", fontsize=8)
+                if idx[0] > 0:
+                    ax.axvline(idx[0] - 0.3, color="grey", lw=0.8)
+        axes[0, 0].legend(title="sample structure", loc="upper left", bbox_to_anchor=(1.01, 1.0))
+        fig.suptitle(_wrap("Seed 004: the KT parameters by DE, output error on the heading against central "
+                           f"differences of it ({sub})"))
         b.figure(fig, s, "difference_vs_integral", "seed 004: KT parameters by DE, output error against central "
                  f"differences, per vessel, records (x1/x2) and noise{at}")
     ent = []
@@ -54,9 +75,10 @@ def build(b: Builder, runs, params, claims):
         run = _first(rf, **{"cfg_vessel.name": "mariner", "cfg_model.name": "nomoto1_nl", "cfg_structure.name": st,
                            "cfg_maneuvers.name": "seed004", "cfg_noise.name": "low"})
         if run is not None:
-            ent.append((f"DE, {st}", run["run_id"]))
+            ent.append((f"DE, {st}", run["run_id"], structure_style(st)))
     validation_figure(b, s, ent, "zigzag_35_35", "validation_zigzag_35_35", "seed 004 Fig. 3: the 35/35 zigzag of the "
-                      f"Abkowitz Mariner predicted by nonlinear KT models identified by DE{at}")
+                      f"Abkowitz Mariner predicted by nonlinear KT models identified by DE{at}",
+                      setup=f"Abkowitz Mariner, nomoto1_nl, 2 records, noise low, {sampling_label(rf)}")
     fit_time_figure(b, r, s)
     claims.extend(claim(b, r, p))
 

@@ -64,7 +64,10 @@ def _module_file(module: str) -> Path | None:
     """The source file of a module of the ``study`` package (found on disk, never imported), else None."""
     if module != PACKAGE and not module.startswith(PACKAGE + "."):
         return None
-    base = REPO_ROOT.joinpath(*module.split("."))
+    parts = module.split(".")
+    if not all(p.isidentifier() for p in parts):  # a malformed name in a config (vessel.kind, _target_)
+        return None
+    base = REPO_ROOT.joinpath(*parts)
     for cand in (base.with_suffix(".py"), base / "__init__.py"):
         if cand.is_file():
             return cand
@@ -72,10 +75,13 @@ def _module_file(module: str) -> Path | None:
 
 
 def _external_file(module: str) -> Path | None:
-    """The source file of a module outside ``study`` (a user's own estimator class), without importing it."""
+    """The source file of a module outside ``study`` (a user's own estimator class). ``find_spec`` of a dotted
+    name imports its parent packages (not the module itself)."""
+    if not all(p.isidentifier() for p in module.split(".")):
+        return None
     try:
         spec = importlib.util.find_spec(module)
-    except (ImportError, ValueError):
+    except Exception:  # ImportError, ValueError, or whatever a parent package raises on import
         return None
     origin = getattr(spec, "origin", None) if spec is not None else None
     return Path(origin) if origin and origin.endswith(".py") and Path(origin).is_file() else None
@@ -157,10 +163,8 @@ def file_hash(path: Path) -> str:
 
 
 def _key(path: Path) -> str:
-    try:
-        return path.resolve().relative_to(REPO_ROOT).as_posix()
-    except ValueError:
-        return path.resolve().as_posix()  # a user's module outside the repository
+    """A file's name in a fingerprint: its path relative to the repository (the same on every machine)."""
+    return path.resolve().relative_to(REPO_ROOT.resolve()).as_posix()
 
 
 def _combine(files: dict) -> str:
@@ -183,12 +187,15 @@ def _names(value) -> list:
 
 
 def _data_file(group: str, name: str) -> Path | None:
+    if not name or "/" in name or "\\" in name or name.startswith("."):
+        return None
     p = REPO_ROOT / "conf" / group / f"{name}.yaml"
     return p if p.is_file() else None
 
 
 def entries(config: dict) -> dict:
-    """Per component, ``(entry modules, extra files)`` of a run's configuration (see the module docstring).
+    """Per component, ``(entry modules, extra files as (name, path))`` of a run's configuration (see the module
+    docstring).
     Keys a configuration lacks are simply not used (a hand-made configuration gets the generic modules)."""
     config = config if isinstance(config, dict) else {}
     vessel = config.get("vessel") if isinstance(config.get("vessel"), dict) else {}
@@ -207,7 +214,7 @@ def entries(config: dict) -> dict:
         mans = config.get("maneuvers") if isinstance(config.get("maneuvers"), dict) else {}
         for name in _names(mans.get("train")) + _names(mans.get("validate")):
             if (p := _data_file("maneuver", name)) is not None:
-                sim_files.append(p)
+                sim_files.append((_key(p), p))
 
     mod = ["study.identify.models", "study.identify.regression"]
     mod_files = []
@@ -216,7 +223,7 @@ def entries(config: dict) -> dict:
         mod += ["study.doctor.fit", "study.doctor.effects"]
         eff_dir = REPO_ROOT / "study" / "doctor" / "effects"
         mod += [f"study.doctor.effects.{p.stem}" for p in sorted(eff_dir.glob("*.py")) if p.stem != "__init__"]
-        mod_files += [p for n in effects if (p := _data_file("effect", n)) is not None]
+        mod_files += [(_key(p), p) for n in effects if (p := _data_file("effect", n)) is not None]
 
     est_mods, est_files = ["study.identify.estimators"], []
     target = est.get("_target_")
@@ -225,7 +232,7 @@ def entries(config: dict) -> dict:
         if _module_file(module) is not None:
             est_mods.append(module)
         elif (p := _external_file(module)) is not None:
-            est_files.append(p)
+            est_files.append((f"module {module}", p))  # by name: its path differs between machines
 
     pipe = ["study.pipeline"]
     if on_files:
@@ -242,7 +249,7 @@ def _fingerprint_of(spec: tuple) -> tuple:
     files, comps = {}, {}
     for name, mods, extra in spec:
         own = {_key(p): file_hash(p) for p in (_module_file(m) for m in closure(mods)) if p is not None}
-        own.update({_key(p): file_hash(p) for p in extra})
+        own.update({key: file_hash(p) for key, p in extra})
         comps[name] = _combine(own)
         files.update(own)
     return _combine(comps), tuple(sorted(comps.items())), tuple(sorted(files.items()))

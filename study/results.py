@@ -985,7 +985,12 @@ class ResultStore:
         """Build ``(runs, params)`` from the records without writing anything (see :attr:`report`)."""
         runs, params = [], []
         for rec in self._scan():
-            row = _run_row(rec, code_fp.code_fingerprint(rec["config"]))
+            try:
+                current = code_fp.code_fingerprint(rec["config"])
+            except Exception as e:  # never let one record stall the table: its row says nothing about its code
+                warnings.warn(f"run {rec['run_id']}: no code fingerprint for its configuration ({e})", RuntimeWarning)
+                current = None
+            row = _run_row(rec, current)
             runs.append(row)
             params += _param_rows(rec, row)
         self.report.stale = sum(1 for r in runs if r.get("code_current") is False)

@@ -844,3 +844,38 @@ def test_overlapping_sweeps_compute_each_run_once(tmp_path, wait):
     runs, _ = ResultStore(root).collect()
     assert len(runs) == N_OVERLAP and (runs["status"] == "ok").all()
     assert not list((root / "records" / ".claims").glob("*.json"))  # every claim released
+
+
+def test_app_recomputes_a_run_after_its_estimator_changed(tmp_path):
+    """The issue's case end to end, on a copy of the code: after an edit of another estimator the run is
+    resumed; after an edit of its own estimator it is computed again, and the table says the old row is gone."""
+    import shutil
+
+    repo = tmp_path / "repo"
+    for d in ("study", "conf", "hydra_plugins"):
+        shutil.copytree(REPO / d, repo / d, ignore=shutil.ignore_patterns("__pycache__"))
+    results = tmp_path / "results"
+
+    def run(*extra):
+        env = dict(os.environ, PYTHONPATH=str(repo), NUMBA_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+        env.pop("STUDY_RESULTS_DIR", None)
+        p = subprocess.run([sys.executable, "-m", "study", *_QUICK, *extra, f"results_dir={results}"], cwd=tmp_path,
+                           env=env, capture_output=True, text=True, timeout=900)
+        assert p.returncode == 0, p.stderr[-2000:]
+        return p.stdout + p.stderr
+
+    def edit(rel):
+        with open(repo / rel, "a") as fh:
+            fh.write("\n# a fix\n")
+
+    assert "resumed" not in run()
+    edit("study/identify/estimators/svr.py")  # not used by this run (estimator ls)
+    assert "(already finished, resumed)" in run()
+    edit("study/identify/estimators/linear.py")  # the module of ls
+    out = run()
+    assert "(already finished, resumed)" not in out and ": skipped" in out
+    assert len(list((results / "records").glob("*.json"))) == 1
+    assert len(list((results / "records" / "superseded").glob("*.json"))) == 1
+    runs = pd.read_parquet(results / "runs.parquet")
+    assert len(runs) == 1 and bool(runs.loc[0, "code_current"])
+    assert "(already finished, resumed)" in run("force=false")

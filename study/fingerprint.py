@@ -11,7 +11,8 @@ The components of a run, and the modules each starts from (:func:`entries`):
 ``model``      ``study.identify.models``, ``study.identify.regression``; with ``model.effects``: the doctor's
                ``study.doctor.fit``, every module of ``study.doctor.effects`` and ``conf/effect/<name>.yaml``
 ``structure``  ``study.identify.structures``
-``estimator``  the module of ``estimator._target_`` and ``study.identify.estimators`` (the factory)
+``estimator``  the module of ``estimator._target_`` and ``study.identify.estimators`` (the factory); a module
+               outside the repository (a user's own class) is hashed under its module name
 ``pipeline``   ``study.pipeline`` (a simulated run); a run on files (``train`` given): also ``study.records_run``,
                ``study.schema``, ``study.loaders``, ``study.diagnose`` and the doctor's ``checks``, ``fit`` and
                ``maneuver_metrics``; a doctor ladder step (``study: doctor``): ``study.diagnose`` and the doctor

@@ -1,9 +1,11 @@
 """The Hydra app: ``python -m study`` runs one run, ``python -m study -m a=1,2 b=x,y`` sweeps;
 ``python -m study train=<files> [validate=<files>] ...`` runs on the user's own records (``study.records_run``).
 
-Each job resolves its configuration, hands it to the results store (which skips a run already finished,
-records a failure without stopping the sweep, and writes the record atomically), and the table
-``results/runs.parquet`` + ``results/params.parquet`` is rebuilt when the run or the sweep ends.
+Each job resolves its configuration, hands it to the results store (which skips a run already finished by the
+current code, leaves a run that another live process is computing to it in a sweep and waits for it in a single
+run, records a failure without stopping the sweep, and writes the record atomically), and the table
+``results/runs.parquet`` + ``results/params.parquet`` is rebuilt when the run or the sweep ends. A results folder
+that cannot be written is refused before the first job (exit status 2), and a failed rebuild exits with status 1.
 """
 from __future__ import annotations
 

@@ -1,9 +1,11 @@
 """The Hydra app: ``python -m study`` runs one run, ``python -m study -m a=1,2 b=x,y`` sweeps;
 ``python -m study train=<files> [validate=<files>] ...`` runs on the user's own records (``study.records_run``).
 
-Each job resolves its configuration, hands it to the results store (which skips a run already finished,
-records a failure without stopping the sweep, and writes the record atomically), and the table
-``results/runs.parquet`` + ``results/params.parquet`` is rebuilt when the run or the sweep ends.
+Each job resolves its configuration, hands it to the results store (which skips a run already finished by the
+current code, leaves a run that another live process is computing to it in a sweep and waits for it in a single
+run, records a failure without stopping the sweep, and writes the record atomically), and the table
+``results/runs.parquet`` + ``results/params.parquet`` is rebuilt when the run or the sweep ends. A results folder
+that cannot be written is refused before the first job (exit status 2), and a failed rebuild exits with status 1.
 """
 from __future__ import annotations
 
@@ -11,6 +13,7 @@ import json
 import logging
 import re
 import sys
+import warnings
 from pathlib import Path
 
 import hydra
@@ -42,13 +45,47 @@ def _results_dir(cfg: DictConfig) -> Path:
 
 
 class CollectResults(Callback):
-    """Bring the results table up to date at the end of a run or of a whole sweep."""
+    """Refuse a results folder that cannot be written before the first job; bring the results table up to date
+    at the end of a run or of a whole sweep (a failure to do so exits with status 1, the records intact)."""
+
+    def _check(self, config: DictConfig) -> None:
+        from .results import ResultsFolderError, ResultStore
+
+        store = ResultStore(_results_dir(config))
+        try:
+            store.check_writable()
+        except ResultsFolderError as e:
+            print(f"study: error: {e}", file=sys.stderr, flush=True)
+            sys.exit(2)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # malformed records are reported by the collect
+            moved = store.migrate()  # records named by an earlier version's run id: found by any spelling
+        if moved.get("migrated") or moved.get("duplicate"):
+            print(f"study: {moved.get('migrated', 0)} record(s) renamed to canonical run ids, "
+                  f"{moved.get('duplicate', 0)} duplicate(s) moved to records/superseded/", file=sys.stderr, flush=True)
+
+    def on_run_start(self, config: DictConfig, **kwargs) -> None:
+        self._check(config)
+
+    def on_multirun_start(self, config: DictConfig, **kwargs) -> None:
+        self._check(config)
 
     def _collect(self, config: DictConfig) -> None:
         from .results import ResultStore
 
         root = _results_dir(config)
-        runs, _ = ResultStore(root).collect()
+        store = ResultStore(root)
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # printed from the report below
+                runs, _ = store.collect()
+        except Exception as e:  # Hydra turns a callback's exception into a warning and exit status 0
+            print(f"study: error: the results table was not rebuilt: {type(e).__name__}: {e} (the records in "
+                  f"{root / 'records'} are kept; `python -m study.results rebuild --root {root}` retries)",
+                  file=sys.stderr, flush=True)
+            sys.exit(1)
+        for line in store.report.lines():
+            print(f"study: {line}", file=sys.stderr, flush=True)
         print(f"Results: {root / 'runs.parquet'} ({len(runs)} runs), {root / 'params.parquet'}")
 
     def on_run_end(self, config: DictConfig, **kwargs) -> None:
@@ -104,11 +141,20 @@ class SweepProgress(Callback):
               + ", ".join(f"{v} {k}" for k, v in sorted(counts.items())), flush=True)
 
 
+def _in_sweep() -> bool:
+    from hydra.core.hydra_config import HydraConfig
+
+    try:
+        return str(HydraConfig.get().mode) == "RunMode.MULTIRUN"
+    except ValueError:  # not under Hydra (a test calling main's pieces)
+        return False
+
+
 @hydra.main(config_path=CONF_DIR, config_name="config", version_base="1.3")
 def main(cfg: DictConfig) -> dict:
     from .pipeline import run_study, study_config
     from .records_run import RecordsInputError
-    from .results import ResultStore, run_guarded
+    from .results import RESUME_MODES, ResultStore, run_guarded
 
     conf = OmegaConf.to_container(cfg, resolve=True)
     try:  # a run on the user's files (train=...): read, checksum and check them before anything is written
@@ -116,10 +162,19 @@ def main(cfg: DictConfig) -> dict:
     except RecordsInputError as e:
         print(f"study: error: {e}", file=sys.stderr, flush=True)
         sys.exit(2)
+    resume = conf.get("resume") or "code"
+    if resume not in RESUME_MODES:
+        print(f"study: error: resume={resume}: expected one of {', '.join(RESUME_MODES)}", file=sys.stderr, flush=True)
+        sys.exit(2)
     store = ResultStore(_results_dir(cfg))
-    record = run_guarded(store, run_conf, lambda: run_study(conf, data=data), seed=int(conf.get("seed", 0)))
+    # in a sweep, a run another live process is computing (an overlapping sweep) is left to it; a single run waits
+    record = run_guarded(store, run_conf, lambda: run_study(conf, data=data), seed=int(conf.get("seed", 0)),
+                         force=bool(conf.get("force", False)), resume=resume, wait=not _in_sweep())
     status = record.get("status")
     msg = f"run {record['run_id']}: {status}" + (" (already finished, resumed)" if record.get("resumed") else "")
+    if status == "claimed":
+        by = record.get("claimed_by") or {}
+        msg += f" (being computed by process {by.get('pid', '?')} on {by.get('host', '?')}; left to it)"
     if status == "failed":
         msg += "\n" + str(record.get("error", "")).strip().splitlines()[-1]
     log.info(msg)

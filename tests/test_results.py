@@ -12,8 +12,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from study.results import (NON_SCIENTIFIC_KEYS, ResultStore, provenance, read_table, run_guarded, run_id,
-                           validate_record)
+from study.results import (NON_SCIENTIFIC_KEYS, ResultsFolderError, ResultStore, legacy_run_id, provenance,
+                           read_table, run_guarded, run_id, validate_record)
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -364,3 +364,518 @@ def test_cli_rebuild_and_show(tmp_path):
                        capture_output=True, text=True, cwd=tmp_path, env=env, timeout=120)
     assert p.returncode == 0, p.stderr
     assert "1 ok, 1 failed, 1 skipped" in p.stdout and "ZeroDivisionError" in p.stdout
+
+
+# ------------------------------------------------------------------------ a store that never stalls or lies
+
+def _write_raw(store, name, rec):
+    store.records_dir.mkdir(parents=True, exist_ok=True)
+    path = store.records_dir / name
+    path.write_text(json.dumps(rec))
+    return path
+
+
+def _cli(*args, cwd):
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    return subprocess.run([sys.executable, "-m", "study.results", *args], capture_output=True, text=True, cwd=cwd,
+                          env=env, timeout=300)
+
+
+def test_malformed_misnamed_and_unknown_status_records_are_skipped_named_and_counted(tmp_path):
+    store = ResultStore(tmp_path / "res")
+    good = run_guarded(store, _conf(), lambda: _result(), seed=0)
+    # valid JSON of the wrong shape: this stalled rebuild and show with an AttributeError naming no file
+    bad_conf = _conf(seed=1)
+    oops = _write_raw(store, f"{run_id(bad_conf)}.json", _record(bad_conf, params="oops"))
+    status_conf = _conf(seed=2)
+    done = _write_raw(store, f"{run_id(status_conf)}.json", _record(status_conf, status="done"))
+    prov_conf = _conf(seed=3)
+    prov = _write_raw(store, f"{run_id(prov_conf)}.json", _record(prov_conf, provenance="laptop"))
+    # a copy of a good record under another name: it would be a second row of one run
+    copy = store.records_dir / "copy of record.json"
+    copy.write_text(store.record_path(good["run_id"]).read_text())
+    with pytest.warns(RuntimeWarning) as w:
+        runs, params = store.collect()
+    msgs = " ".join(str(x.message) for x in w)
+    for p in (oops, done, prov, copy):
+        assert p.name in msgs
+    assert "params must be a list" in msgs and "status 'done'" in msgs and "does not match its run_id" in msgs
+    assert len(runs) == 1 and runs.loc[0, "run_id"] == good["run_id"] and len(params) == 3
+    assert sorted(p.name for p, _ in store.report.skipped) == sorted(p.name for p in (oops, done, prov, copy))
+    # the resume path does not take a malformed 'ok' record for a finished run: it is recomputed, and kept
+    again = run_guarded(store, bad_conf, lambda: _result(), seed=1)
+    assert again["status"] == "ok" and not again.get("resumed")
+    kept = list(store.failed_dir.glob(f"{run_id(bad_conf)}.*.json"))
+    assert len(kept) == 1 and json.loads(kept[0].read_text())["params"] == "oops"
+    # the CLI names each file and counts them; --strict turns them into exit status 1
+    p = _cli("rebuild", "--root", str(store.root), cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert "2 runs" in p.stdout and "3 record(s) left out" in p.stdout
+    for f in (done, prov, copy):
+        assert f.name in p.stderr
+    assert _cli("rebuild", "--strict", "--root", str(store.root), cwd=tmp_path).returncode == 1
+    p = _cli("show", "--root", str(store.root), cwd=tmp_path)
+    assert p.returncode == 0 and "3 record(s) left out" in p.stdout and done.name in p.stderr
+
+
+def test_unknown_status_is_refused_on_write(tmp_path):
+    store = ResultStore(tmp_path)
+    with pytest.raises(ValueError, match="status 'done'"):
+        store.write(_record(_conf(), status="done"))
+    assert not store.record_path(run_id(_conf())).exists()
+
+
+def test_rebuild_never_replaces_a_table_with_an_empty_one(tmp_path):
+    store = ResultStore(tmp_path / "res")
+    for s in range(3):
+        run_guarded(store, _conf(seed=s), lambda: _result(), seed=s)
+    store.collect()
+    before = store.runs_path.read_bytes()
+    # the records are gone (a wrong --root holding someone's tables, a deleted folder): the table stays
+    os.rename(store.records_dir, tmp_path / "elsewhere")
+    with pytest.raises(ResultsFolderError, match=r"refusing to replace .*runs.parquet \(3 runs\)"):
+        store.collect()
+    assert store.runs_path.read_bytes() == before
+    p = _cli("rebuild", "--root", str(store.root), cwd=tmp_path)
+    assert p.returncode == 1 and "refusing to replace" in p.stderr and "--allow-empty" in p.stderr
+    assert store.runs_path.read_bytes() == before
+    # only malformed records left: the same refusal, which says so
+    _write_raw(store, "0123456789abcdef.json", {"run_id": "0123456789abcdef", "status": "ok"})
+    with pytest.warns(RuntimeWarning), pytest.raises(ResultsFolderError, match="1 malformed record"):
+        store.collect()
+    # asked for explicitly, it is done
+    p = _cli("rebuild", "--allow-empty", "--root", str(store.root), cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert len(read_table(store.runs_path)) == 0
+
+
+def _crash_while_writing(root, rid, ready):
+    """A writer that dies mid-run: it holds the run's claim and has a temp record and table half written."""
+    from study.results import _tmp_path
+
+    store = ResultStore(root)
+    claim = store.claim(rid)
+    assert claim.acquire(wait=False)
+    store.records_dir.mkdir(parents=True, exist_ok=True)
+    _tmp_path(store.records_dir, f"{rid}.json").write_text('{"run_id": "feedf')
+    _tmp_path(store.root, "runs.parquet").write_bytes(b"PAR1")
+    ready.set()
+    time.sleep(600)
+
+
+def test_crash_leftovers_are_reported_and_cleaned_and_a_dead_claim_is_recovered(tmp_path):
+    from study.results import _tmp_path
+
+    root = tmp_path / "res"
+    store = ResultStore(root)
+    run_guarded(store, _conf(), lambda: _result(), seed=0)
+    victim = _conf(seed=777)
+    rid = run_id(victim)
+    ctx = mp.get_context("spawn")
+    ready = ctx.Event()
+    child = ctx.Process(target=_crash_while_writing, args=(str(root), rid, ready), daemon=True)
+    child.start()
+    try:
+        assert ready.wait(120)
+        # while the writer lives, its files are its own and its run is claimed: a sweep leaves it to it
+        assert not [p for p, _, removable in store.leftovers() if removable]
+        busy = run_guarded(store, victim, lambda: _result(), seed=777, wait=False)
+        assert busy["status"] == "claimed" and busy["claimed_by"]["pid"] == child.pid
+        os.kill(child.pid, 9)  # SIGKILL: no cleanup of any kind
+        child.join(30)
+    finally:
+        if child.is_alive():
+            child.kill()
+    mine = _tmp_path(store.records_dir, "x.json")  # a live writer's (this process's) temp file: kept
+    mine.write_text("{")
+    old = store.records_dir / ".abc.json.4242.0123456789ab.tmp"  # the earlier naming, two hours old: removed
+    old.write_text("{")
+    os.utime(old, (time.time() - 7200, time.time() - 7200))
+    foreign = store.records_dir / ".abc.json~othernode~77~0123456789ab.tmp"  # another host's, recent: kept
+    foreign.write_text("{")
+    art = _tmp_path(store.artefacts_root, rid)  # a half-built artefact folder of the dead process
+    art.mkdir(parents=True)
+    (art / "trace.csv").write_text("t\n")
+    os.rename(art, art.with_name(art.name.replace(f"~{os.getpid()}~", f"~{child.pid}~")))
+    # `show` reports them without touching anything
+    p = _cli("show", "--root", str(root), cwd=tmp_path)
+    assert p.returncode == 0 and "crash leftover" in p.stderr and old.name in p.stderr and old.exists()
+    runs, _ = store.collect()
+    removed = {p.name for p, _ in store.report.removed}
+    kept = {p.name for p, _ in store.report.kept}
+    assert any(n.startswith(f".{rid}.json~") for n in removed)
+    assert any(n.startswith(".runs.parquet~") for n in removed)
+    assert any(n.startswith(f".{rid}~") for n in removed)  # the artefact folder
+    assert old.name in removed and f"{rid}.json" in removed  # the dead process's claim
+    assert mine.name in kept and foreign.name in kept
+    assert mine.exists() and foreign.exists() and not old.exists()
+    assert any("has ended" in why for _, why in store.report.removed)
+    assert any("removed crash leftover" in line for line in store.report.lines())
+    assert len(runs) == 1
+    # the claim of the killed process is no obstacle: its run is computed at once, not left to a dead owner
+    rec = run_guarded(store, victim, lambda: _result(), seed=777, wait=False)
+    assert rec["status"] == "ok" and not rec.get("resumed")
+
+
+def test_an_unwritable_results_folder_is_refused(tmp_path):
+    blocker = tmp_path / "a file"
+    blocker.write_text("not a folder")
+    with pytest.raises(ResultsFolderError, match="not writable.*results_dir"):
+        ResultStore(blocker / "results").check_writable()
+    ResultStore(tmp_path / "fine").check_writable()
+    assert not [p for p in (tmp_path / "fine").rglob("*") if p.is_file()]  # the probe leaves nothing behind
+    if os.geteuid() != 0:  # root writes through permission bits
+        ro = tmp_path / "ro"
+        (ro / "records").mkdir(parents=True)
+        os.chmod(ro / "records", 0o555)
+        try:
+            with pytest.raises(ResultsFolderError, match="not writable"):
+                ResultStore(ro).check_writable()
+        finally:
+            os.chmod(ro / "records", 0o755)
+
+
+def _run_app(args, cwd, results):
+    env = dict(os.environ, PYTHONPATH=str(REPO), NUMBA_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    env.pop("STUDY_RESULTS_DIR", None)
+    return subprocess.run([sys.executable, "-m", "study", *args, f"results_dir={results}"], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=900)
+
+
+# a run the store records in seconds: a regression estimator on output_error is 'skipped' before simulating
+_QUICK = ["experiment=tiny", "structure=output_error", "noise=none"]
+
+
+def test_app_refuses_an_unwritable_folder_before_any_job(tmp_path):
+    blocker = tmp_path / "a file"
+    blocker.write_text("")
+    p = _run_app(["-m", *_QUICK, "seed=0,1"], tmp_path, blocker / "results")
+    assert p.returncode == 2 and "not writable" in p.stderr, p.stderr[-2000:]
+    assert "#0" not in p.stdout + p.stderr  # Hydra launched no job
+    assert len(p.stderr.strip().splitlines()) == 1
+
+
+def test_app_resumes_other_spellings_and_a_failed_collect_exits_nonzero(tmp_path):
+    results = tmp_path / "results"
+    p = _run_app(_QUICK, tmp_path, results)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert len(list((results / "records").glob("*.json"))) == 1
+    # the table cannot be written (here: a folder in its place); the run itself is found under another spelling
+    (results / "runs.parquet").unlink()
+    (results / "runs.parquet").mkdir()
+    p = _run_app([*_QUICK, "noise.level=0", "vessel.particulars.Lpp=320"], tmp_path, results)
+    assert "(already finished, resumed)" in p.stderr + p.stdout
+    assert p.returncode == 1 and "results table was not rebuilt" in p.stderr, p.stderr[-2000:]
+    assert len(list((results / "records").glob("*.json"))) == 1
+
+
+def test_failed_collect_callback_exits_nonzero(tmp_path, capsys):
+    from omegaconf import OmegaConf
+
+    from study.app import CollectResults
+
+    store = ResultStore(tmp_path)
+    run_guarded(store, _conf(), lambda: _result(), seed=0)
+    store.runs_path.mkdir()
+    with pytest.raises(SystemExit) as e:
+        CollectResults()._collect(OmegaConf.create({"results_dir": str(tmp_path)}))
+    assert e.value.code == 1 and "results table was not rebuilt" in capsys.readouterr().err
+    # and an empty records folder beside a full table: refused, not emptied
+    store.runs_path.rmdir()
+    store.collect()
+    os.rename(store.records_dir, tmp_path / "moved")
+    with pytest.raises(SystemExit) as e:
+        CollectResults()._collect(OmegaConf.create({"results_dir": str(tmp_path)}))
+    assert e.value.code == 1 and "refusing to replace" in capsys.readouterr().err
+    assert len(read_table(store.runs_path)) == 1
+
+
+# ------------------------------------------------------------------------------------------ canonical run ids
+
+def test_run_id_does_not_depend_on_how_numbers_are_spelt():
+    import numpy as np
+
+    base = _conf(noise={"name": "none", "level": 0.0}, sim={"duration_scale": 1.0})
+    same = [_conf(noise={"name": "none", "level": 0}, sim={"duration_scale": 1}),
+            _conf(noise={"name": "none", "level": -0.0}, sim={"duration_scale": np.float64(1.0)}),
+            _conf(noise={"name": "none", "level": np.int64(0)}, sim={"duration_scale": 1.0}, seed=0.0)]
+    for c in same:
+        assert run_id(c) == run_id(base)
+    assert legacy_run_id(same[0]) != legacy_run_id(base)  # what the old rule made of them
+    # different science, or not a number, stays different
+    for c in (_conf(noise={"name": "none", "level": 1e-12}, sim={"duration_scale": 1.0}),
+              _conf(noise={"name": "none", "level": "0.0"}, sim={"duration_scale": 1.0}),
+              _conf(noise={"name": "none", "level": False}, sim={"duration_scale": 1.0}),
+              _conf(noise={"name": "none", "level": None}, sim={"duration_scale": 1.0})):
+        assert run_id(c) != run_id(base)
+    assert run_id(_conf(seed=2**53 + 1)) != run_id(_conf(seed=2**53))  # ints beyond a float's reach stay exact
+
+
+def test_run_id_of_composed_spellings_and_explicit_defaults():
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    from study.app import CONF_DIR
+
+    spellings = [["noise=none"], ["noise=none", "noise.level=0"], ["noise=none", "noise.level=0.0"],
+                 ["noise=none", "sim.duration_scale=1"], ["noise=none", "depth=deep", "depth.formula=kijima_1990"],
+                 ["noise=none", "vessel.particulars.Lpp=320", "seed=0", "estimator.params.rcond=null"]]
+    ids, legacy = set(), set()
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        for ov in spellings:
+            conf = OmegaConf.to_container(compose(config_name="config", overrides=ov), resolve=True)
+            ids.add(run_id(conf))
+            legacy.add(legacy_run_id(conf))
+        other = OmegaConf.to_container(compose(config_name="config", overrides=["noise=low"]), resolve=True)
+    assert len(ids) == 1 and run_id(other) not in ids
+    assert len(legacy) == 4  # under the old rule: four ids (and four computations) of one configuration
+
+
+def test_records_under_old_run_ids_are_found_and_migrated(tmp_path):
+    store = ResultStore(tmp_path)
+    conf = _conf(noise={"name": "none", "level": 0})  # spelt as an int, as `noise.level=0` gives
+    old = legacy_run_id(conf)
+    assert old != run_id(conf)
+    rec = _record(conf, run_id=old)
+    _write_raw(store, f"{old}.json", rec)
+    (store.artefact_dir(old)).mkdir(parents=True)
+    (store.artefact_dir(old) / "trace.csv").write_text("t\n")
+    # the table shows it (a legacy name is valid) and says it can be migrated
+    runs, _ = store.collect()
+    assert list(runs["run_id"]) == [old] and len(store.report.legacy) == 1
+    # a resume of that configuration finds it, renames it and its artefacts, and reuses it
+    calls = []
+    again = run_guarded(store, conf, lambda: calls.append(1) or _result(), seed=0, resume="config")
+    assert again["resumed"] and not calls and again["run_id"] == run_id(conf) and again["migrated_from"] == [old]
+    assert not store.record_path(old).exists() and not store.artefact_dir(old).exists()
+    assert (store.artefact_dir(run_id(conf)) / "trace.csv").read_text() == "t\n"
+    # two old spellings of one configuration: one row; `migrate` (the app runs it before the first job) keeps
+    # one record and sets the other aside
+    c_int = _conf(seed=5, noise={"name": "none", "level": 0})
+    c_float = _conf(seed=5, noise={"name": "none", "level": 0.0})
+    _write_raw(store, f"{legacy_run_id(c_int)}.json",
+               _record(c_int, run_id=legacy_run_id(c_int), finished="2024-01-01T00:00:02+00:00"))
+    _write_raw(store, f"{legacy_run_id(c_float)}.json",
+               _record(c_float, run_id=legacy_run_id(c_float), status="failed", error="boom"))
+    with pytest.warns(RuntimeWarning, match="same configuration"):
+        runs, _ = store.collect()
+    assert len(runs) == 2 and len(store.report.duplicates) == 1
+    assert legacy_run_id(c_int) in set(runs["run_id"])  # the finished one is kept
+    p = _cli("migrate", "--root", str(tmp_path), cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert "1 record(s) renamed" in p.stdout and "1 duplicate(s)" in p.stdout
+    recs = sorted(store.records_dir.glob("*.json"))
+    assert {r.stem for r in recs} == {run_id(conf), run_id(c_int)}
+    assert json.loads(store.record_path(run_id(c_int)).read_text())["status"] == "ok"
+    assert len(list(store.superseded_dir.glob("*.json"))) == 1
+    runs, _ = store.collect()
+    assert len(runs) == 2 and not store.report.legacy and not store.report.duplicates
+    # a migration is idempotent
+    assert store.migrate() == {"current": 2}
+
+
+# --------------------------------------------------------------------------------------- resume knows the code
+
+def _code(**components):
+    comps = {"simulator": "s1", "model": "m1", "structure": "t1", "estimator": "e1", "pipeline": "p1", **components}
+    return {"fingerprint": "/".join(f"{k}={v}" for k, v in sorted(comps.items())), "components": comps,
+            "files": {}}
+
+
+def test_code_change_invalidates_resume_and_force_reruns(tmp_path):
+    store = ResultStore(tmp_path)
+    calls = []
+
+    def fn(v=1.0):
+        calls.append(v)
+        return _result(v)
+
+    conf = _conf()
+    first = run_guarded(store, conf, fn, seed=0, code=_code())
+    assert first["code"] == _code() and len(calls) == 1
+    assert run_guarded(store, conf, fn, seed=0, code=_code())["resumed"] and len(calls) == 1
+    # an estimator fixed since: the run is computed again and the old record kept aside
+    fixed = run_guarded(store, conf, lambda: fn(2.0), seed=0, code=_code(estimator="e2"))
+    assert not fixed.get("resumed") and calls == [1.0, 2.0] and fixed["code"]["components"]["estimator"] == "e2"
+    aside = list(store.superseded_dir.glob("*.json"))
+    assert len(aside) == 1 and json.loads(aside[0].read_text())["code"] == _code()
+    # resume=config takes any finished record; force recomputes even an up-to-date one
+    assert run_guarded(store, conf, fn, seed=0, code=_code(model="m9"), resume="config")["resumed"]
+    forced = run_guarded(store, conf, lambda: fn(3.0), seed=0, code=_code(estimator="e2"), force=True)
+    assert not forced.get("resumed") and calls[-1] == 3.0 and len(list(store.superseded_dir.glob("*.json"))) == 2
+    assert store.read(run_id(conf))["params"][0]["estimate"] == 3.0
+    with pytest.raises(ValueError, match="resume='always'"):
+        run_guarded(store, conf, fn, seed=0, resume="always")
+
+
+def test_the_table_marks_rows_made_by_other_code(tmp_path):
+    from study import fingerprint
+
+    store = ResultStore(tmp_path)
+    now = run_guarded(store, _conf(seed=1), lambda: _result(), seed=1)  # the current code's fingerprint
+    assert now["code"] == fingerprint.code_fingerprint(_conf(seed=1))
+    current = now["code"]["components"]
+    run_guarded(store, _conf(seed=2), lambda: _result(), seed=2,
+                code={**now["code"], "fingerprint": "older", "components": {**current, "estimator": "older"}})
+    _write_raw(store, f"{run_id(_conf(seed=3))}.json", _record(_conf(seed=3)))  # written before fingerprints
+    runs, _ = store.collect()
+    by_seed = runs.set_index("seed")
+    assert bool(by_seed.loc[1, "code_current"]) and by_seed.loc[1, "code_changed"] == ""
+    assert not bool(by_seed.loc[2, "code_current"]) and by_seed.loc[2, "code_changed"] == "estimator"
+    assert not bool(by_seed.loc[3, "code_current"]) and by_seed.loc[3, "code_changed"] == "unknown"
+    assert by_seed.loc[1, "code_fingerprint"] == now["code"]["fingerprint"]
+    assert store.report.stale == 2 and any("changed since" in line for line in store.report.lines())
+
+
+def test_fingerprint_follows_the_source_of_the_components_a_run_uses(tmp_path, monkeypatch):
+    import shutil
+
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf
+
+    from study import fingerprint
+    from study.app import CONF_DIR
+
+    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
+        confs = {ov: OmegaConf.to_container(compose(config_name="config", overrides=[ov] if ov else []),
+                                            resolve=True)
+                 for ov in ("", "estimator=svr_eps", "vessel=mariner", "model.effects=[current]")}
+    copy = tmp_path / "repo"
+    shutil.copytree(REPO / "study", copy / "study", ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(REPO / "conf", copy / "conf")
+    monkeypatch.setattr(fingerprint, "REPO_ROOT", copy)
+    fingerprint.clear_cache()
+    try:
+        def fps():
+            fingerprint.clear_cache()
+            return {k: fingerprint.code_fingerprint(c) for k, c in confs.items()}
+
+        before = fps()
+        files = before[""]["files"]
+        assert "study/identify/estimators/linear.py" in files and "study/sim/mmg.py" in files
+        assert "study/identify/estimators/svr.py" not in files and "study/sim/abkowitz.py" not in files
+        assert "study/results.py" not in files and not any(f.startswith("study/figures") for f in files)
+        assert "conf/maneuver/zigzag_10_10.yaml" in files  # read by name at run time
+        assert any(f.startswith("study/doctor/effects/") for f in before["model.effects=[current]"]["files"])
+        assert not any(f.startswith("study/doctor") for f in files)
+
+        def edit(rel, text):
+            p = copy / rel
+            p.write_bytes(p.read_bytes() + text.encode())
+
+        edit("study/identify/estimators/svr.py", "\n# a fix\n")
+        after = fps()
+        assert after["estimator=svr_eps"]["fingerprint"] != before["estimator=svr_eps"]["fingerprint"]
+        assert fingerprint.changed_components(before["estimator=svr_eps"], after["estimator=svr_eps"]) == \
+            ["estimator"]
+        for k in ("", "vessel=mariner", "model.effects=[current]"):
+            assert after[k] == before[k], k
+        edit("study/sim/abkowitz.py", "\n# a fix\n")
+        after2 = fps()
+        assert fingerprint.changed_components(after["vessel=mariner"], after2["vessel=mariner"]) == ["simulator"]
+        assert after2[""] == before[""]
+        edit("study/identify/fit.py", "\n# a fix\n")  # imported by the models and the pipeline
+        after3 = fps()
+        assert fingerprint.changed_components(after2[""], after3[""]) == ["model", "pipeline"]
+        edit("study/results.py", "\n# not part of any run\n")
+        assert fps() == after3
+        # line endings do not matter (a Windows checkout), contents do
+        mmg = copy / "study/sim/mmg.py"
+        mmg.write_bytes(mmg.read_bytes().replace(b"\n", b"\r\n"))
+        assert fps() == after3
+    finally:
+        fingerprint.clear_cache()
+
+
+# ----------------------------------------------------------------------------- overlapping sweeps: claims
+
+N_OVERLAP = 12
+
+
+def _overlapping_sweep(root, who, wait, barrier, out):
+    """One of several sweeps over the same runs, each run taking a while; every computation is logged."""
+    store = ResultStore(root)
+    log = Path(root) / "computed.log"
+    barrier.wait()
+    statuses = []
+    for i in range(N_OVERLAP):
+        conf = _conf(seed=500 + i)
+
+        def fn(i=i):
+            with open(log, "a") as fh:  # O_APPEND: one whole line per computation
+                fh.write(f"{i} {who}\n")
+            time.sleep(0.3)
+            return _result(float(who))
+
+        rec = run_guarded(store, conf, fn, seed=conf["seed"], wait=wait, code=_code())
+        statuses.append(rec["status"])
+    out.put((who, statuses))
+    _exit_child(out)
+
+
+@pytest.mark.parametrize("wait", [True, False], ids=["wait", "skip"])
+def test_overlapping_sweeps_compute_each_run_once(tmp_path, wait):
+    ctx = mp.get_context("spawn")
+    root = tmp_path / "res"
+    ResultStore(root).check_writable()
+    barrier, out = ctx.Barrier(4), ctx.Queue()
+    procs = [ctx.Process(target=_overlapping_sweep, args=(str(root), w, wait, barrier, out), daemon=True)
+             for w in range(4)]
+    try:
+        for p in procs:
+            p.start()
+        results = dict(out.get(timeout=300) for _ in procs)
+        for p in procs:
+            p.join(60)
+    finally:
+        for p in procs:
+            if p.is_alive():
+                p.terminate()
+                p.join(5)
+    assert all(p.exitcode == 0 for p in procs), [p.exitcode for p in procs]
+    computed = (root / "computed.log").read_text().split()
+    runs_computed = computed[::2]
+    assert sorted(runs_computed) == sorted(str(i) for i in range(N_OVERLAP)), "a run was computed twice or never"
+    statuses = [s for st in results.values() for s in st]
+    if wait:  # every sweep ends with every run: its own or another's record
+        assert statuses.count("ok") == 4 * N_OVERLAP
+    else:  # a sweep leaves a run another live sweep is computing to it
+        assert set(statuses) <= {"ok", "claimed"} and statuses.count("ok") >= N_OVERLAP
+    runs, _ = ResultStore(root).collect()
+    assert len(runs) == N_OVERLAP and (runs["status"] == "ok").all()
+    assert not list((root / "records" / ".claims").glob("*.json"))  # every claim released
+
+
+def test_app_recomputes_a_run_after_its_estimator_changed(tmp_path):
+    """The issue's case end to end, on a copy of the code: after an edit of another estimator the run is
+    resumed; after an edit of its own estimator it is computed again, and the table says the old row is gone."""
+    import shutil
+
+    repo = tmp_path / "repo"
+    for d in ("study", "conf", "hydra_plugins"):
+        shutil.copytree(REPO / d, repo / d, ignore=shutil.ignore_patterns("__pycache__"))
+    results = tmp_path / "results"
+
+    def run(*extra):
+        env = dict(os.environ, PYTHONPATH=str(repo), NUMBA_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+        env.pop("STUDY_RESULTS_DIR", None)
+        p = subprocess.run([sys.executable, "-m", "study", *_QUICK, *extra, f"results_dir={results}"], cwd=tmp_path,
+                           env=env, capture_output=True, text=True, timeout=900)
+        assert p.returncode == 0, p.stderr[-2000:]
+        return p.stdout + p.stderr
+
+    def edit(rel):
+        with open(repo / rel, "a") as fh:
+            fh.write("\n# a fix\n")
+
+    assert "resumed" not in run()
+    edit("study/identify/estimators/svr.py")  # not used by this run (estimator ls)
+    assert "(already finished, resumed)" in run()
+    edit("study/identify/estimators/linear.py")  # the module of ls
+    out = run()
+    assert "(already finished, resumed)" not in out and ": skipped" in out
+    assert len(list((results / "records").glob("*.json"))) == 1
+    assert len(list((results / "records" / "superseded").glob("*.json"))) == 1
+    runs = pd.read_parquet(results / "runs.parquet")
+    assert len(runs) == 1 and bool(runs.loc[0, "code_current"])
+    assert "(already finished, resumed)" in run("force=false")

@@ -1,0 +1,288 @@
+"""The code fingerprint of a run: a hash of the source of the components it used, so that resume can tell a
+result computed by today's code from one computed before, say, an estimator was fixed (benchopt keys its cache
+the same way, on the source files of the solver, dataset and objective of a result).
+
+The components of a run, and the modules each starts from (:func:`entries`):
+
+=============  ======================================================================================================
+``simulator``  ``study.sim`` (the compiled integrator and the effects), the vessel kind's module (``vessel.kind``),
+               ``study.measure``, ``study.maneuvers``, and the YAML of every manoeuvre the run simulates
+               (``conf/maneuver/<name>.yaml``: read at run time by its name, so not part of the configuration)
+``model``      ``study.identify.models``, ``study.identify.regression``; with ``model.effects``: the doctor's
+               ``study.doctor.fit``, every module of ``study.doctor.effects`` and ``conf/effect/<name>.yaml``
+``structure``  ``study.identify.structures``
+``estimator``  the module of ``estimator._target_`` and ``study.identify.estimators`` (the factory); a module
+               outside the repository (a user's own class) is hashed under its module name
+``pipeline``   ``study.pipeline`` (a simulated run); a run on files (``train`` given): also ``study.records_run``,
+               ``study.schema``, ``study.loaders``, ``study.diagnose`` and the doctor's ``checks``, ``fit`` and
+               ``maneuver_metrics``; a doctor ladder step (``study: doctor``): ``study.diagnose`` and the doctor
+=============  ======================================================================================================
+
+A component is its entry modules **plus every module of the ``study`` package they import**, found statically
+(the import lines of its source, those inside functions too), transitively: ``study.identify.fit`` is in the
+``model`` and ``pipeline`` components because they import it. An import *into* one of the
+:data:`OPTIONAL_PACKAGES` from a module outside it is not followed: those packages run only when the
+configuration says so (``model.effects``, ``train``, ...), and they are then entries. So editing the SVR
+estimator changes the fingerprint of SVR runs only, editing ``study/sim/mmg.py`` that of runs on MMG vessels,
+and editing the figures or the results store changes none.
+
+Each file is hashed on its contents with line endings normalised to ``\\n`` (never mtimes): the same checkout
+gives the same fingerprint on every machine and operating system. Each file is read and hashed once per process.
+Not included: the versions of numpy, scipy, ... (they are in the record's ``provenance``) and the configuration
+(it is in the run id). A comment or docstring edit in a component changes its fingerprint too (the honest,
+simple rule: what is hashed is what ran); ``resume=config`` reuses results whatever code made them.
+"""
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import re
+from functools import lru_cache
+from pathlib import Path
+
+#: The folder holding the ``study`` package and ``conf/``; file keys are paths relative to it.
+REPO_ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = "study"
+
+#: Packages that run only when a run's configuration asks for them: imports into them from outside are not
+#: followed (``study.pipeline`` imports ``study.doctor.fit`` inside a function, for ``model.effects`` only).
+OPTIONAL_PACKAGES = ("study.doctor", "study.records_run", "study.diagnose", "study.figures", "study.studies",
+                     "study.reality_check", "study.results", "study.app", "study.simulate", "study.fingerprint")
+
+COMPONENTS = ("simulator", "model", "structure", "estimator", "pipeline")
+#: Hex digits kept of each file's hash in a record (48 bits: a collision between two versions of one file is
+#: not a practical concern) and of each component's and the run's fingerprint.
+FILE_DIGITS = 12
+DIGITS = 16
+
+_FILE_RUN_MODULES = ("study.records_run", "study.schema", "study.loaders", "study.diagnose", "study.doctor.checks",
+                     "study.doctor.fit", "study.doctor.maneuver_metrics")
+
+
+# ------------------------------------------------------------------------------------------------ modules
+@lru_cache(maxsize=None)
+def _module_file(module: str) -> Path | None:
+    """The source file of a module of the ``study`` package (found on disk, never imported), else None."""
+    if module != PACKAGE and not module.startswith(PACKAGE + "."):
+        return None
+    parts = module.split(".")
+    if not all(p.isidentifier() for p in parts):  # a malformed name in a config (vessel.kind, _target_)
+        return None
+    base = REPO_ROOT.joinpath(*parts)
+    for cand in (base.with_suffix(".py"), base / "__init__.py"):
+        if cand.is_file():
+            return cand
+    return None
+
+
+def _external_file(module: str) -> Path | None:
+    """The source file of a module outside ``study`` (a user's own estimator class). ``find_spec`` of a dotted
+    name imports its parent packages (not the module itself)."""
+    if not all(p.isidentifier() for p in module.split(".")):
+        return None
+    try:
+        spec = importlib.util.find_spec(module)
+    except Exception:  # ImportError, ValueError, or whatever a parent package raises on import
+        return None
+    origin = getattr(spec, "origin", None) if spec is not None else None
+    return Path(origin) if origin and origin.endswith(".py") and Path(origin).is_file() else None
+
+
+def _optional_root(module: str) -> str | None:
+    for pkg in OPTIONAL_PACKAGES:
+        if module == pkg or module.startswith(pkg + "."):
+            return pkg
+    return None
+
+
+# an import statement at the start of a line: `from <module> import <names or (names over lines)>`, `import <modules>`
+_IMPORT = re.compile(r"^[ \t]*(?:from[ \t]+(\.*[\w.]*)[ \t]+import[ \t]+(\([^)]*\)|[^\n#;]*)|import[ \t]+([^\n#;]*))",
+                     re.MULTILINE)
+
+
+@lru_cache(maxsize=None)
+def _imports(module: str) -> tuple:
+    """The ``study`` modules that ``module`` imports anywhere in its source (sorted).
+
+    Import lines are found with a regular expression, not ``ast``: parsing and walking the package's trees cost
+    0.5-1 s a process, the expression 10 ms. An import line quoted at the start of a docstring line counts too,
+    which can only add a module to a component, never drop one.
+    """
+    path = _module_file(module)
+    if path is None:
+        return ()
+    pkg = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    found = set()
+    for m in _IMPORT.finditer(_read(path)):
+        src, names, plain = m.groups()
+        if plain is not None:
+            cands = [part.split()[0] for part in plain.split(",") if part.split()]
+        else:
+            level = len(src) - len(src.lstrip("."))
+            target = src.lstrip(".")
+            if level:
+                parts = pkg.split(".")
+                parts = parts[: len(parts) - (level - 1)]
+                target = ".".join(parts + ([target] if target else []))
+            # `from a import b` imports module a.b when b is a module, else a name of a
+            cands = [target] + [f"{target}.{part.split()[0]}" for part in names.strip("()").split(",")
+                                if part.split() and part.split()[0].isidentifier()]
+        found.update(c for c in cands if _module_file(c) is not None)
+    return tuple(sorted(found))
+
+
+@lru_cache(maxsize=None)
+def closure(entries: tuple) -> tuple:
+    """``entries`` and every ``study`` module they import, transitively (imports from outside an optional
+    package into it are not followed); sorted module names."""
+    seen: set = set()
+    todo = list(entries)
+    while todo:
+        mod = todo.pop()
+        if mod in seen or _module_file(mod) is None:
+            continue
+        seen.add(mod)
+        own = _optional_root(mod)
+        for dep in _imports(mod):
+            opt = _optional_root(dep)
+            if opt is None or opt == own:
+                todo.append(dep)
+    return tuple(sorted(seen))
+
+
+# ------------------------------------------------------------------------------------------------- hashing
+@lru_cache(maxsize=None)
+def _read(path: Path) -> str:
+    return path.read_bytes().decode("utf-8", errors="surrogateescape")
+
+
+@lru_cache(maxsize=None)
+def file_hash(path: Path) -> str:
+    """sha256 of a file's contents with CRLF and CR line endings made LF (first :data:`FILE_DIGITS` hex digits)."""
+    data = path.read_bytes().replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+    return hashlib.sha256(data).hexdigest()[:FILE_DIGITS]
+
+
+def _key(path: Path) -> str:
+    """A file's name in a fingerprint: its path relative to the repository (the same on every machine)."""
+    return path.resolve().relative_to(REPO_ROOT.resolve()).as_posix()
+
+
+def _combine(files: dict) -> str:
+    text = "\n".join(f"{k} {files[k]}" for k in sorted(files))
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()[:DIGITS]
+
+
+# ------------------------------------------------------------------------------------------------ a run
+def _names(value) -> list:
+    """Manoeuvre or effect names from a config value: a name, a list of names or of dicts with a name."""
+    if value is None:
+        return []
+    items = value if isinstance(value, (list, tuple)) else [value]
+    out = []
+    for it in items:
+        name = it.get("name") if isinstance(it, dict) else it
+        if isinstance(name, str):
+            out.append(name)
+    return out
+
+
+def _data_file(group: str, name: str) -> Path | None:
+    if not name or "/" in name or "\\" in name or name.startswith("."):
+        return None
+    p = REPO_ROOT / "conf" / group / f"{name}.yaml"
+    return p if p.is_file() else None
+
+
+def entries(config: dict) -> dict:
+    """Per component, ``(entry modules, extra files as (name, path))`` of a run's configuration (see the module
+    docstring).
+    Keys a configuration lacks are simply not used (a hand-made configuration gets the generic modules)."""
+    config = config if isinstance(config, dict) else {}
+    vessel = config.get("vessel") if isinstance(config.get("vessel"), dict) else {}
+    model = config.get("model") if isinstance(config.get("model"), dict) else {}
+    est = config.get("estimator") if isinstance(config.get("estimator"), dict) else {}
+    on_files = config.get("train") is not None
+    doctor = config.get("study") == "doctor"
+
+    sim = ["study.sim", "study.measure", "study.maneuvers"]
+    kind = vessel.get("kind")
+    if isinstance(kind, str):
+        # study.sim.KINDS maps a kind to its module; read statically so nothing is imported here
+        sim.append(f"study.sim.{kind}")
+    sim_files = []
+    if not on_files:
+        mans = config.get("maneuvers") if isinstance(config.get("maneuvers"), dict) else {}
+        for name in _names(mans.get("train")) + _names(mans.get("validate")):
+            if (p := _data_file("maneuver", name)) is not None:
+                sim_files.append((_key(p), p))
+
+    mod = ["study.identify.models", "study.identify.regression"]
+    mod_files = []
+    effects = _names(model.get("effects"))
+    if effects:
+        mod += ["study.doctor.fit", "study.doctor.effects"]
+        eff_dir = REPO_ROOT / "study" / "doctor" / "effects"
+        mod += [f"study.doctor.effects.{p.stem}" for p in sorted(eff_dir.glob("*.py")) if p.stem != "__init__"]
+        mod_files += [(_key(p), p) for n in effects if (p := _data_file("effect", n)) is not None]
+
+    est_mods, est_files = ["study.identify.estimators"], []
+    target = est.get("_target_")
+    if isinstance(target, str) and "." in target:
+        module = target.rpartition(".")[0]
+        if _module_file(module) is not None:
+            est_mods.append(module)
+        elif (p := _external_file(module)) is not None:
+            est_files.append((f"module {module}", p))  # by name: its path differs between machines
+
+    pipe = ["study.pipeline"]
+    if on_files:
+        pipe += list(_FILE_RUN_MODULES)
+    if doctor:
+        pipe += ["study.diagnose", "study.doctor.diagnose", "study.doctor.fit", "study.doctor.effects"]
+    return {"simulator": (tuple(sim), tuple(sim_files)), "model": (tuple(mod), tuple(mod_files)),
+            "structure": (("study.identify.structures",), ()), "estimator": (tuple(est_mods), tuple(est_files)),
+            "pipeline": (tuple(pipe), ())}
+
+
+@lru_cache(maxsize=256)
+def _fingerprint_of(spec: tuple) -> tuple:
+    files, comps = {}, {}
+    for name, mods, extra in spec:
+        own = {_key(p): file_hash(p) for p in (_module_file(m) for m in closure(mods)) if p is not None}
+        own.update({key: file_hash(p) for key, p in extra})
+        comps[name] = _combine(own)
+        files.update(own)
+    return _combine(comps), tuple(sorted(comps.items())), tuple(sorted(files.items()))
+
+
+def code_fingerprint(config: dict) -> dict:
+    """The fingerprint of the code a run of ``config`` uses, as stored in its record under ``code``.
+
+    Returns
+    -------
+    dict
+        ``fingerprint`` (hash of the components' hashes), ``components`` (``{component: hash}``, see the module
+        docstring) and ``files`` (``{path relative to the repository: hash of its contents}``, the union over
+        the components). Computed from the files on disk, once per process for each distinct set of modules.
+    """
+    spec = tuple((name, mods, extra) for name, (mods, extra) in entries(config).items())
+    fp, comps, files = _fingerprint_of(spec)
+    return {"fingerprint": fp, "components": dict(comps), "files": dict(files)}
+
+
+def changed_components(stored: dict | None, current: dict) -> list:
+    """The components whose code differs between a record's ``code`` and the current one (``['unknown']`` for
+    a record without a fingerprint, ``[]`` when unchanged)."""
+    if not isinstance(stored, dict) or not isinstance(stored.get("components"), dict):
+        return ["unknown"]
+    if stored.get("fingerprint") == current["fingerprint"]:
+        return []
+    old, new = stored["components"], current["components"]
+    return sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
+
+
+def clear_cache() -> None:
+    """Forget every file read and hash (for a process that edits the source it fingerprints: tests)."""
+    for f in (_module_file, _imports, closure, _read, file_hash, _fingerprint_of):
+        f.cache_clear()

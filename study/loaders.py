@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .schema import Record, SchemaError, validate
+from .schema import Record, SchemaError, not_utf8, validate
 
 DATASETS = ("esso_osaka", "kvlcc2_hsva")
 
@@ -98,11 +98,19 @@ def load_esso_osaka(path, trim: bool = False) -> Record:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such Esso Osaka file")
-    raw = pd.read_csv(path).dropna(how="all")  # one file ends with 327 all-empty rows
+    try:
+        raw = pd.read_csv(path, encoding="utf-8-sig").dropna(how="all")  # one file ends with 327 all-empty rows
+    except UnicodeDecodeError as exc:
+        raise not_utf8(path, exc) from exc
+    except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+        raise SchemaError(f"{path}: not a readable CSV table ({exc})") from exc
     missing = [c for c in ESSO_COLUMNS if c not in raw.columns]
     if missing:
         raise SchemaError(f"{path}: not an Esso Osaka free-running file: missing columns {missing}")
-    df = raw[list(ESSO_COLUMNS)].rename(columns=ESSO_COLUMNS).astype(float)
+    try:
+        df = raw[list(ESSO_COLUMNS)].rename(columns=ESSO_COLUMNS).astype(float)
+    except ValueError as exc:
+        raise SchemaError(f"{path}: a column is not numeric ({exc})") from exc
     df["psi"] = np.unwrap(df["psi"].to_numpy())  # psi_hat is wrapped to (-pi, pi]
     df["wind_dir"] = np.mod(df["wind_dir"], 2 * np.pi)
     df["wind_angle_rel"] = np.angle(np.exp(1j * df["wind_angle_rel"]))
@@ -130,9 +138,17 @@ def load_kvlcc2_hsva(path) -> Record:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such HSVA file")
-    with open(path, encoding="cp1252") as fh:
-        header = [next(fh).strip() for _ in range(4)]
-    arr = np.loadtxt(path, skiprows=4, encoding="cp1252")
+    try:
+        with open(path, encoding="cp1252") as fh:
+            header = [ln.strip() for _, ln in zip(range(4), fh)]
+        arr = np.loadtxt(path, skiprows=4, encoding="cp1252", ndmin=2) if len(header) == 4 else None
+    except UnicodeDecodeError as exc:
+        raise SchemaError(f"{path}: not a Windows-1252 text file (byte at position {exc.start}): not an HSVA "
+                          f".dat") from exc
+    except ValueError as exc:  # a text field or a ragged row among the numbers
+        raise SchemaError(f"{path}: not 12 numeric columns after the 4 header lines ({exc})") from exc
+    if arr is None:
+        raise SchemaError(f"{path}: {len(header)} line(s); an HSVA .dat has 4 header lines, then 12 columns")
     if arr.ndim != 2 or arr.shape[1] != 12:
         raise SchemaError(f"{path}: expected 12 whitespace-separated columns after 4 header lines, "
                           f"found shape {arr.shape}")

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -131,8 +132,9 @@ def main(argv=None) -> None:
     args = ap.parse_args(argv)
     try:
         table, traces = build_table()
-    except RealDataMissing as exc:
-        raise SystemExit(f"study.reality_check: {exc}") from None
+    except RealDataMissing as exc:  # one line: where the data were looked for and how to point at them
+        print(f"study.reality_check: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
     for p in write_outputs(table, traces, Path(args.out)):
         print(f"wrote {p}")
     print(table.round(2).to_string(index=False))

@@ -133,9 +133,9 @@ def windows(n: int) -> np.ndarray:
 
 
 def _cumtrapz(y: np.ndarray, t: np.ndarray) -> np.ndarray:
-    out = np.zeros_like(y, dtype=float)
-    out[1:] = np.cumsum(0.5 * (y[1:] + y[:-1]) * np.diff(t))
-    return out
+    from scipy.integrate import cumulative_trapezoid
+
+    return cumulative_trapezoid(y, t, initial=0.0)
 
 
 def fit_ratio(D: np.ndarray, I: np.ndarray, starts=None, ends=None) -> Ratio:
@@ -168,7 +168,8 @@ def _agrees(k: float) -> bool:
 
 def ratios(df: pd.DataFrame) -> dict:
     """The record's three ratios (``r``: heading change / integral of r; ``uv``: track displacement / integral of
-    the turned velocities; ``course``: course change / heading-plus-drift change) and the window boundaries."""
+    the turned velocities; ``course``: change of the track's course less the drift angle / change of psi), what
+    the velocities miss of the track along and across the heading (``missed``), and the window boundaries."""
     t = df["time"].to_numpy(float)
     psi = df["psi"].to_numpy(float)
     u, v, r = (df[c].to_numpy(float) for c in ("u", "v", "r"))

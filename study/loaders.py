@@ -1,7 +1,10 @@
 """Loaders of the real free-running data in ``../shared/data/real`` into the record schema.
 
 The data are read where they are and never copied into this repository (their licences differ from ours;
-see each folder's SOURCE.md). ``STUDY_REAL_DATA`` overrides the location.
+see each folder's SOURCE.md). Where: the folder named by the environment variable ``STUDY_REAL_DATA``, else the
+first ``shared/data/real`` beside the repository or beside any folder above it (``<clone>/../shared/data/real``
+for a clone next to ``shared/``; a git worktree deeper down finds the same folder). :func:`real_data_dir` says
+where it looked when nothing is there.
 
 - Esso Osaka 3 m model, Osaka University (Wakita et al. 2022, J Mar Sci Technol 27, 772-785; Miyauchi et al.
   2022, J Mar Sci Technol 27, 1065-1083), CC BY-NC-SA 4.0. Already SI, radians, body velocities at midship,
@@ -22,16 +25,59 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .schema import Record, SchemaError, validate
+from .schema import Record, SchemaError, not_utf8, validate
 
 DATASETS = ("esso_osaka", "kvlcc2_hsva")
 
 
+ENV_VAR = "STUDY_REAL_DATA"
+_SUBDIR = Path("shared") / "data" / "real"
+
+
+def _candidates() -> list[Path]:
+    """``shared/data/real`` beside the repository and beside each folder above it, nearest first."""
+    repo = Path(__file__).resolve().parents[1]
+    return [parent / _SUBDIR for parent in repo.parents]
+
+
 def real_data_dir() -> Path:
-    env = os.environ.get("STUDY_REAL_DATA")
+    """The folder of the real datasets: ``$STUDY_REAL_DATA`` if set, else the nearest existing
+    ``shared/data/real`` above the repository, else where it is expected (``<repo>/../shared/data/real``; it may
+    not exist: :func:`missing_real_data` says so in one line)."""
+    env = os.environ.get(ENV_VAR)
     if env:
-        return Path(env)
-    return Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+        return Path(env).expanduser()
+    cands = _candidates()
+    for c in cands:
+        if c.is_dir():
+            return c
+    return cands[0]
+
+
+def missing_real_data(dataset: str | None = None) -> str:
+    """One line saying where the real data were looked for and how to point the project at them."""
+    what = f"real dataset '{dataset}'" if dataset else "real data"
+    sub = {"kvlcc2_hsva": "kvlcc2_hsva/raw_data/*.dat", "esso_osaka": "esso_osaka_frt/data/*/*.csv"}.get(
+        dataset or "", "kvlcc2_hsva/ and esso_osaka_frt/")
+    if os.environ.get(ENV_VAR):
+        return (f"{what} not found in {ENV_VAR}={os.environ[ENV_VAR]} (expected {sub} inside it): point "
+                f"{ENV_VAR} at the folder real/ of the project's shared data")
+    return (f"{what} not found: expected {sub} in {_candidates()[0]} (or in a shared/data/real further up); "
+            f"put the shared data there or set {ENV_VAR}=/path/to/shared/data/real")
+
+
+class RealDataMissing(FileNotFoundError):
+    """The real datasets are not where the project looks for them (the message says where and how to fix)."""
+
+
+def require_real_records(dataset: str, data_dir=None, kind: str | None = None) -> list[Path]:
+    """:func:`list_real_records`, raising :class:`RealDataMissing` with a one-line fix when there are none."""
+    files = list_real_records(dataset, data_dir, kind)
+    if not files:
+        if data_dir:
+            raise RealDataMissing(f"the real dataset '{dataset}' not found in {data_dir}")
+        raise RealDataMissing(missing_real_data(dataset))
+    return files
 
 
 ESSO_COLUMNS = {
@@ -52,11 +98,19 @@ def load_esso_osaka(path, trim: bool = False) -> Record:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such Esso Osaka file")
-    raw = pd.read_csv(path).dropna(how="all")  # one file ends with 327 all-empty rows
+    try:
+        raw = pd.read_csv(path, encoding="utf-8-sig").dropna(how="all")  # one file ends with 327 all-empty rows
+    except UnicodeDecodeError as exc:
+        raise not_utf8(path, exc) from exc
+    except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+        raise SchemaError(f"{path}: not a readable CSV table ({exc})") from exc
     missing = [c for c in ESSO_COLUMNS if c not in raw.columns]
     if missing:
         raise SchemaError(f"{path}: not an Esso Osaka free-running file: missing columns {missing}")
-    df = raw[list(ESSO_COLUMNS)].rename(columns=ESSO_COLUMNS).astype(float)
+    try:
+        df = raw[list(ESSO_COLUMNS)].rename(columns=ESSO_COLUMNS).astype(float)
+    except ValueError as exc:
+        raise SchemaError(f"{path}: a column is not numeric ({exc})") from exc
     df["psi"] = np.unwrap(df["psi"].to_numpy())  # psi_hat is wrapped to (-pi, pi]
     df["wind_dir"] = np.mod(df["wind_dir"], 2 * np.pi)
     df["wind_angle_rel"] = np.angle(np.exp(1j * df["wind_angle_rel"]))
@@ -84,9 +138,17 @@ def load_kvlcc2_hsva(path) -> Record:
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such HSVA file")
-    with open(path, encoding="cp1252") as fh:
-        header = [next(fh).strip() for _ in range(4)]
-    arr = np.loadtxt(path, skiprows=4, encoding="cp1252")
+    try:
+        with open(path, encoding="cp1252") as fh:
+            header = [ln.strip() for _, ln in zip(range(4), fh)]
+        arr = np.loadtxt(path, skiprows=4, encoding="cp1252", ndmin=2) if len(header) == 4 else None
+    except UnicodeDecodeError as exc:
+        raise SchemaError(f"{path}: not a Windows-1252 text file (byte at position {exc.start}): not an HSVA "
+                          f".dat") from exc
+    except ValueError as exc:  # a text field or a ragged row among the numbers
+        raise SchemaError(f"{path}: not 12 numeric columns after the 4 header lines ({exc})") from exc
+    if arr is None:
+        raise SchemaError(f"{path}: {len(header)} line(s); an HSVA .dat has 4 header lines, then 12 columns")
     if arr.ndim != 2 or arr.shape[1] != 12:
         raise SchemaError(f"{path}: expected 12 whitespace-separated columns after 4 header lines, "
                           f"found shape {arr.shape}")

@@ -8,7 +8,10 @@ Processing order in :meth:`MeasurementModel.apply` (each step optional):
    (the standard deviation). Heading and positions carry arbitrary offsets (initial heading, where the origin
    is) that say nothing about how large the measured variation is; the deviation from the mean does not
    depend on them, so the same noise fraction means the same thing for every record;
-3. white Gaussian noise with standard deviation ``noise_level * S_c``;
+3. white Gaussian noise with standard deviation ``noise_level * S_c`` (the *relative* model) and/or an absolute
+   standard deviation ``noise_sd[c]`` in the channel's own units (the *absolute* model: a sensor's accuracy, as
+   the configs of ``conf/noise/`` give it per sensor; both given, the two add as independent noises:
+   ``sqrt((noise_level * S_c)^2 + noise_sd^2)``);
 4. coloured noise: a first-order Gauss-Markov process (exact discretisation of an Ornstein-Uhlenbeck process,
    AR(1) on a uniform grid) with correlation time ``tau`` and stationary standard deviation ``level * S_c``;
    lag-1 autocorrelation ``exp(-dt / tau)`` (Gelb 1974, *Applied Optimal Estimation*, sec. 3.8; Brown & Hwang
@@ -37,6 +40,31 @@ import numpy as np
 import pandas as pd
 
 DEFAULT_CHANNELS = ("u", "v", "r", "psi", "x0", "y0", "delta")
+#: the sensors of an absolute noise config (``conf/noise/*.yaml``, ``kind: absolute``): the key's unit, the
+#: factor to the schema's SI/radian units, and the channels the sensor measures
+SENSORS = {
+    "position_m": ("m", 1.0, ("x0", "y0")),                        # GNSS / optical tracking, per axis
+    "heading_deg": ("deg", math.pi / 180.0, ("psi",)),             # gyrocompass / heading sensor
+    "yaw_rate_deg_s": ("deg/s", math.pi / 180.0, ("r",)),          # rate-of-turn sensor
+    "speed_m_s": ("m/s", 1.0, ("u", "v")),                         # speed log (or GNSS velocity), per axis
+    "rudder_deg": ("deg", math.pi / 180.0, ("delta",)),            # rudder angle indicator
+}
+NOISE_KINDS = ("relative", "absolute")
+
+
+def sensor_sd(sensors: dict, where: str = "noise") -> dict:
+    """Channel -> absolute standard deviation in SI units and radians, from ``{sensor key: sd}`` in the keys'
+    units (:data:`SENSORS`); an unknown key or a negative value is an error naming it."""
+    out = {}
+    for key, val in (sensors or {}).items():
+        if key not in SENSORS:
+            raise ValueError(f"{where}: unknown sensor '{key}'; known: {list(SENSORS)} (units in the names)")
+        v = float(val)
+        if not (v >= 0 and math.isfinite(v)):
+            raise ValueError(f"{where}.{key}={val}: a standard deviation must be finite and >= 0")
+        _, factor, chans = SENSORS[key]
+        out.update({c: v * factor for c in chans})
+    return out
 OFFSET_CHANNELS = ("psi", "x0", "y0")
 _PROCESSES = {"white": 0, "colored": 1, "outliers": 2}
 
@@ -146,6 +174,9 @@ class MeasurementModel:
     noise_level : float or dict
         White-noise standard deviation as a fraction of each channel's scale ``S_c`` (RMS; RMS of the deviation
         from the mean for ``offset_channels``). A dict gives it per channel (absent channels: 0).
+    noise_sd : dict or None
+        Absolute white-noise standard deviation per channel, in the channel's units (m, m/s, rad, rad/s); absent
+        channels: 0. ``study.pipeline.measurement`` fills it from a noise config of ``kind: absolute``.
     bias : dict
         Channel -> constant added, in the channel's units (SI, rad).
     colored : dict or None
@@ -166,6 +197,7 @@ class MeasurementModel:
     dt: float | None = None
     channels: tuple = DEFAULT_CHANNELS
     noise_level: float | dict = 0.0
+    noise_sd: dict | None = None
     bias: dict = field(default_factory=dict)
     colored: dict | None = None
     outliers: dict | None = None
@@ -206,7 +238,11 @@ class MeasurementModel:
             raise ValueError("MeasurementModel.apply: the clean record has NaN/inf in a measured channel")
         S = self.scales(out)
         white = _per_channel(self.noise_level, chans, "noise_level")
-        sigma = {c: white[c] * S[c] for c in chans}
+        absolute = _per_channel(self.noise_sd or {}, chans, "noise_sd")
+        # the relative and the absolute noise are independent: their standard deviations add in quadrature (a
+        # channel with one of them keeps it bit for bit)
+        sigma = {c: (math.hypot(white[c] * S[c], absolute[c]) if absolute[c] > 0 else white[c] * S[c])
+                 for c in chans}
         col = dict(self.colored or {})
         if col:
             if "tau" not in col or not float(col["tau"]) > 0:

@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 
 from . import maneuvers as man_mod
-from .measure import MeasurementModel
+from .measure import NOISE_KINDS, MeasurementModel, sensor_sd
 from .metrics import prediction_metrics, standard_metrics
 from .sim import default_dt, load_vessel, simulate
 from .sim.effects import NotApplicable, ShallowWater
@@ -85,11 +85,42 @@ def sample_interval(conf: dict, vessel=None) -> float | None:
     return step * max(1, round(float(dt_lu) * T / step))
 
 
+def vessel_scale(vessel) -> str:
+    """``full`` or ``model``: the vessel config's ``scale`` (full when it says nothing)."""
+    scale = str(((getattr(vessel, "cfg", None) or {}).get("scale")) or "full")
+    if scale not in ("full", "model"):
+        raise ValueError(f"vessel '{getattr(vessel, 'name', '?')}': scale={scale!r}; expected 'full' or 'model'")
+    return scale
+
+
+def noise_sd(conf: dict, vessel=None) -> dict | None:
+    """The absolute white-noise standard deviation per channel (SI, rad) of a ``kind: absolute`` noise config:
+    its ``full_scale`` or ``model_scale`` sensors, by the vessel's ``scale``; None for the relative kind."""
+    nz = conf.get("noise") or {}
+    kind = nz.get("kind", "relative")
+    if kind not in NOISE_KINDS:
+        raise ValueError(f"noise.kind={kind!r}: expected one of {list(NOISE_KINDS)}")
+    if kind == "relative":
+        return None
+    if nz.get("level"):
+        raise ValueError(f"noise '{nz.get('name')}': kind absolute takes standard deviations per sensor "
+                         f"(full_scale, model_scale), not level={nz.get('level')}; use kind: relative for that")
+    key = f"{vessel_scale(vessel)}_scale"
+    if key not in nz:
+        raise ValueError(f"noise '{nz.get('name')}': no '{key}' sensors for vessel "
+                         f"'{getattr(vessel, 'name', '?')}' (scale: {vessel_scale(vessel)})")
+    return sensor_sd(nz[key], where=f"noise.{key}")
+
+
 def measurement(conf: dict, seed: int, vessel=None) -> MeasurementModel:
+    """The measurement model of a run: ``conf['noise']`` of ``kind: relative`` (``level``: fractions of each
+    channel's RMS) or ``kind: absolute`` (sensor standard deviations in physical units, at the vessel's scale)."""
     nz = dict(conf.get("noise") or {})
+    sd = noise_sd(conf, vessel)
     return MeasurementModel(
-        dt=sample_interval(conf, vessel), noise_level=_level(nz.get("level", 0.0)), bias=nz.get("bias") or {},
-        colored=nz.get("colored"), outliers=nz.get("outliers"), dropouts=nz.get("dropouts"), seed=seed,
+        dt=sample_interval(conf, vessel), noise_level=0.0 if sd is not None else _level(nz.get("level", 0.0)),
+        noise_sd=sd, bias=nz.get("bias") or {}, colored=nz.get("colored"), outliers=nz.get("outliers"),
+        dropouts=nz.get("dropouts"), seed=seed,
     )
 
 

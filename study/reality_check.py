@@ -15,12 +15,13 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from .loaders import list_real_records, load_kvlcc2_hsva
+from .loaders import RealDataMissing, load_kvlcc2_hsva, require_real_records
 from .maneuvers import Maneuver
 from .metrics import zigzag_metrics
 from .sim import load_vessel, simulate
@@ -65,7 +66,10 @@ def vessel_at(vessel, u0: float, n: float | None):
 
 def build_table(data_dir=None) -> tuple[pd.DataFrame, dict]:
     rows, traces = [], {}
-    files = {Path(p).stem.replace("HSVA_CPMC_KVLCC2_", ""): p for p in list_real_records("kvlcc2_hsva", data_dir)}
+    files = {Path(p).stem.replace("HSVA_CPMC_KVLCC2_", ""): p for p in require_real_records("kvlcc2_hsva", data_dir)}
+    lacking = [f"HSVA_CPMC_KVLCC2_{run}.dat" for run in RUNS if run not in files]
+    if lacking:
+        raise RealDataMissing(f"{Path(files[next(iter(files))]).parent}: lacks {lacking} of the HSVA zigzags")
     for run in RUNS:
         meas = load_kvlcc2_hsva(files[run]).data
         amp, sw = float(run.split("_")[1]), float(run.split("_")[2])
@@ -131,7 +135,11 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=str(OUT_DIR))
     args = ap.parse_args(argv)
-    table, traces = build_table()
+    try:
+        table, traces = build_table()
+    except RealDataMissing as exc:  # one line: where the data were looked for and how to point at them
+        print(f"study.reality_check: {exc}", file=sys.stderr)
+        raise SystemExit(2) from None
     for p in write_outputs(table, traces, Path(args.out)):
         print(f"wrote {p}")
     print(table.round(2).to_string(index=False))

@@ -12,6 +12,7 @@ import json
 import math
 import os
 import uuid
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -58,6 +59,23 @@ class SchemaError(ValueError):
     """A record that does not follow the schema; the message names the file and the problem."""
 
 
+class RecordWarning(UserWarning):
+    """A record that follows the schema but looks implausible (``study.plausibility``); the message names the file,
+    the column, where, and what to check."""
+
+
+#: what ``validate`` does with the plausibility checks of ``study.plausibility``: ``error`` (a certain unit mistake
+#: raises, a suspicion warns), ``warn`` (everything warns), ``off``
+PLAUSIBILITY = ("error", "warn", "off")
+
+
+def not_utf8(path, exc: UnicodeDecodeError) -> SchemaError:
+    """The one-line error of a text file that is not UTF-8 (a Latin-1 / Windows-1252 export, typically)."""
+    byte = exc.object[exc.start:exc.start + 1].hex() if isinstance(exc.object, (bytes, bytearray)) else "?"
+    return SchemaError(f"{path}: not UTF-8 text (byte 0x{byte} at position {exc.start}; a Latin-1 or Windows-1252 "
+                       f"export?): re-save it as UTF-8, e.g. iconv -f latin1 -t utf-8 old.csv > new.csv")
+
+
 @dataclass
 class Record:
     """A record: the data (schema columns), its metadata, and where it came from."""
@@ -83,9 +101,17 @@ ESTIMABLE = ("u", "v", "r")
 ESTIMATOR_INPUTS = ("x0", "y0", "psi")
 
 
-def validate(df: pd.DataFrame, path=None, min_samples: int = 20, hint: str = "") -> None:
+def validate(df: pd.DataFrame, path=None, min_samples: int = 20, hint: str = "",
+             plausibility: str = "error") -> None:
     """Raise :class:`SchemaError` if ``df`` is not a valid record; extra columns are allowed and kept.
-    ``hint``: appended to the message of missing columns (how else the record could be read)."""
+    ``hint``: appended to the message of missing columns (how else the record could be read).
+
+    Then the plausibility checks of ``study.plausibility`` (do the channels agree with each other in the
+    schema's units?): with ``plausibility="error"`` a certain unit mistake (degrees, deg/s, milliseconds, knots,
+    two records joined) raises :class:`SchemaError` and a suspicion warns (:class:`RecordWarning`); ``"warn"``
+    turns every finding into a warning, ``"off"`` skips them."""
+    if plausibility not in PLAUSIBILITY:
+        raise ValueError(f"validate: plausibility={plausibility!r}; expected one of {list(PLAUSIBILITY)}")
     where = _where(path)
     missing = [c for c in REQUIRED if c not in df.columns]
     if missing:
@@ -127,6 +153,14 @@ def validate(df: pd.DataFrame, path=None, min_samples: int = 20, hint: str = "")
         raise SchemaError(f"{where}: column 'psi' jumps by {jumps.max():.4g} rad at row {i}: either degrees where "
                           f"radians are expected (convert with numpy.deg2rad) or a wrapped heading "
                           f"(unwrap with numpy.unwrap)")
+    if plausibility == "off":
+        return
+    from .plausibility import check
+
+    for f in check(df):
+        if f.level == "error" and plausibility == "error":
+            raise SchemaError(f"{where}: {f.message}")
+        warnings.warn(f"{where}: {f.message}", RecordWarning, stacklevel=2)
 
 
 def from_arrays(time, u, v, r, x0, y0, psi, delta, n, **optional) -> pd.DataFrame:
@@ -142,7 +176,8 @@ def _jsonable(meta: dict) -> dict:
     return json.loads(json.dumps(meta, default=lambda o: o.item() if hasattr(o, "item") else str(o)))
 
 
-def read_record(path, min_samples: int = 20, states: str = "measured", state_options: dict | None = None) -> Record:
+def read_record(path, min_samples: int = 20, states: str = "measured", state_options: dict | None = None,
+                plausibility: str = "error") -> Record:
     """Read and validate a record from ``.csv`` (``# key: value`` metadata lines) or ``.parquet``.
 
     ``states`` says where the body velocities ``u, v, r`` come from:
@@ -159,7 +194,9 @@ def read_record(path, min_samples: int = 20, states: str = "measured", state_opt
     ``meta["state_estimation"]`` the filter's settings (noise standard deviations, process noise, how each was
     chosen). ``state_options``: the estimator's options (``state_estimation.DEFAULTS``: absolute standard
     deviations ``position_std`` [m], ``heading_std`` [rad], ``u_std``, ``v_std`` [m/s], ``r_std`` [rad/s], or
-    ``"auto"``; ``process``).
+    ``"auto"``; ``process``). ``plausibility``: as in :func:`validate`.
+
+    CSV files are UTF-8 (a byte-order mark is skipped); another encoding is an error naming the file and the fix.
     """
     if states not in STATES:
         raise ValueError(f"read_record: states='{states}'; expected one of {list(STATES)}")
@@ -171,8 +208,11 @@ def read_record(path, min_samples: int = 20, states: str = "measured", state_opt
         raise SchemaError(f"{path}: unsupported file type '{ext}'; supported: {list(SUPPORTED)}")
     meta: dict = {}
     if ext == ".csv":
-        with open(path, encoding="utf-8") as fh:
-            lines = fh.read().splitlines(keepends=True)
+        try:
+            with open(path, encoding="utf-8-sig") as fh:  # -sig: a byte-order mark (Excel's UTF-8) is skipped
+                lines = fh.read().splitlines(keepends=True)
+        except UnicodeDecodeError as exc:
+            raise not_utf8(path, exc) from exc
         body = []
         for ln in lines:
             if ln.startswith("#") and not body:
@@ -196,17 +236,26 @@ def read_record(path, min_samples: int = 20, states: str = "measured", state_opt
         except Exception as exc:  # pyarrow raises several types for a damaged file
             raise SchemaError(f"{path}: not a readable parquet file ({exc})") from exc
         raw = (table.schema.metadata or {}).get(META_KEY)
-        meta = json.loads(raw) if raw else {}
-        df = table.to_pandas()
+        try:
+            meta = json.loads(raw) if raw else {}
+        except ValueError as exc:
+            raise SchemaError(f"{path}: its '{META_KEY.decode()}' metadata is not JSON ({exc})") from exc
+        if not isinstance(meta, dict):
+            raise SchemaError(f"{path}: its '{META_KEY.decode()}' metadata is a {type(meta).__name__}, expected a "
+                              f"JSON object")
+        try:
+            df = table.to_pandas()
+        except Exception as exc:  # noqa: BLE001 - pyarrow types pandas cannot hold
+            raise SchemaError(f"{path}: its table cannot be read into columns ({exc})") from exc
     lacking = [c for c in ESTIMABLE if c not in df.columns]
     if states == "measured" or (states == "auto" and not lacking):
         hint = ""
         if lacking and all(c in df.columns for c in ESTIMATOR_INPUTS):
             hint = (f"; to estimate {lacking} from x0, y0, psi (EKF + RTS smoother), read it with "
                     f"states='auto' (on the command line: states=auto)")
-        validate(df, path, min_samples=min_samples, hint=hint)
+        validate(df, path, min_samples=min_samples, hint=hint, plausibility=plausibility)
     else:
-        df, meta = _estimate_states(df, meta, path, min_samples, lacking, state_options)
+        df, meta = _estimate_states(df, meta, path, min_samples, lacking, state_options, plausibility)
     known = [c.name for c in COLUMNS if c.name in df.columns]
     df[known] = df[known].astype(float)  # CSV gives int64 for whole numbers
     return Record(data=df, meta=meta, path=str(path))
@@ -221,7 +270,7 @@ def with_estimated_states(record: Record, state_options: dict | None = None, min
 
 
 def _estimate_states(df: pd.DataFrame, meta: dict, path, min_samples: int, lacking: list,
-                     state_options: dict | None) -> tuple[pd.DataFrame, dict]:
+                     state_options: dict | None, plausibility: str = "error") -> tuple[pd.DataFrame, dict]:
     """The record with u, v, r (and u_dot, v_dot, r_dot) from the state estimator; validated before (with
     stand-ins for the missing u, v, r, so that every other problem gets its usual message) and after."""
     need = [c for c in ESTIMATOR_INPUTS if c not in df.columns]
@@ -230,7 +279,8 @@ def _estimate_states(df: pd.DataFrame, meta: dict, path, min_samples: int, lacki
                  hint=f"; estimating {lacking or list(ESTIMABLE)} needs the positions and heading "
                       f"{list(ESTIMATOR_INPUTS)}")
     stand_in = df.assign(**{c: 0.0 for c in lacking})
-    validate(stand_in, path, min_samples=min_samples)
+    # the stand-ins cannot agree with the track: the plausibility checks wait for the estimated u, v, r
+    validate(stand_in, path, min_samples=min_samples, plausibility="off" if lacking else plausibility)
     from .identify.state_estimation import apply_to_frame
 
     src = df.copy()
@@ -240,7 +290,7 @@ def _estimate_states(df: pd.DataFrame, meta: dict, path, min_samples: int, lacki
         out, settings = apply_to_frame(src, state_options)
     except ValueError as exc:
         raise SchemaError(f"{_where(path)}: estimating u, v, r failed: {exc}") from exc
-    validate(out, path, min_samples=min_samples)
+    validate(out, path, min_samples=min_samples, plausibility=plausibility)
     meta = dict(meta)
     meta["states"] = "ekf"
     settings = {k: v for k, v in settings.items() if k != "seconds"}  # metadata stay reproducible
@@ -282,9 +332,9 @@ def write_record(record: Record, path, overwrite: bool = False) -> Path:
 
 
 def read_records(spec, min_samples: int = 20, states: str = "measured",
-                 state_options: dict | None = None) -> list[Record]:
-    """Records from a file, a folder (every .csv/.parquet inside, sorted) or a glob pattern; ``states`` and
-    ``state_options`` as in :func:`read_record`."""
+                 state_options: dict | None = None, plausibility: str = "error") -> list[Record]:
+    """Records from a file, a folder (every .csv/.parquet inside, sorted) or a glob pattern; ``states``,
+    ``state_options`` and ``plausibility`` as in :func:`read_record`."""
     if states not in STATES:
         raise ValueError(f"read_records: states='{states}'; expected one of {list(STATES)}")
     p = Path(str(spec)).expanduser()
@@ -296,4 +346,5 @@ def read_records(spec, min_samples: int = 20, states: str = "measured",
         files = sorted(Path(f) for f in globmod.glob(str(spec)) if Path(f).suffix.lower() in SUPPORTED)
     if not files:
         raise FileNotFoundError(f"{spec}: no record files (.csv/.parquet) found")
-    return [read_record(f, min_samples=min_samples, states=states, state_options=state_options) for f in files]
+    return [read_record(f, min_samples=min_samples, states=states, state_options=state_options,
+                        plausibility=plausibility) for f in files]

@@ -24,7 +24,7 @@ FAST = {"emcee": ["estimator.params.target_ess=150", "estimator.params.min_tau_m
 
 def _conf(tmp_path, overrides):
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-        cfg = compose(config_name="config", overrides=["experiment=tiny", "noise=low", *overrides])
+        cfg = compose(config_name="config", overrides=["experiment=tiny", "noise=low_relative", *overrides])
     conf = OmegaConf.to_container(cfg, resolve=True)
     conf["results_dir"] = str(tmp_path)
     return conf

@@ -205,7 +205,7 @@ def test_cli_on_simulated_files_names_the_hidden_current(tmp_path):
     for m, stem in (("zigzag_10_10", "train_a"), ("zigzag_20_20", "train_b"), ("random_rudder", "train_c"),
                     ("zigzag_20_10", "val_a"), ("turning_35", "val_b")):
         p = subprocess.run([sys.executable, "-m", "study.simulate", "vessel=kvlcc2_l7", f"maneuver={m}",
-                            "environment=current", "noise=low", "noise.sample_dt=0.1", "sim.duration=300",
+                            "environment=current", "noise=low_relative", "noise.sample_dt=0.1", "sim.duration=300",
                             f"seed={len(stem)}", f"out={tmp_path / stem}.csv"], capture_output=True, text=True,
                            timeout=300)
         assert p.returncode == 0, p.stderr[-2000:]

@@ -12,9 +12,13 @@ from study.schema import Record, SchemaError, from_arrays, read_record, read_rec
 
 
 def good_frame(n=200):
+    """A consistent record (psi the integral of r, the track that of u, v turned by psi): no plausibility finding."""
     t = np.arange(n) * 0.1
-    return from_arrays(t, 1.0 + 0 * t, 0.01 * np.sin(t), 0.02 * np.sin(t), t, 0 * t, 0.1 * np.sin(t),
-                       0.17 * np.sign(np.sin(t)), 10.0 + 0 * t)
+    psi, u, v = 0.1 * np.sin(t), 1.0 + 0 * t, 0.01 * np.sin(t)
+    vx, vy = u * np.cos(psi) - v * np.sin(psi), u * np.sin(psi) + v * np.cos(psi)
+    x0 = np.concatenate([[0.0], np.cumsum(0.5 * (vx[1:] + vx[:-1]) * 0.1)])
+    y0 = np.concatenate([[0.0], np.cumsum(0.5 * (vy[1:] + vy[:-1]) * 0.1)])
+    return from_arrays(t, u, v, 0.1 * np.cos(t), x0, y0, psi, 0.17 * np.sign(np.sin(t)), 10.0 + 0 * t)
 
 
 def _write_csv(tmp_path, df, name="bad.csv"):
@@ -92,8 +96,15 @@ REAL = [(ds, p) for ds in DATASETS for p in list_real_records(ds)]
 @pytest.mark.skipif(not REAL, reason="../shared/data/real not available")
 @pytest.mark.parametrize("dataset, path", REAL, ids=[p.name for _, p in REAL])
 def test_every_real_file_loads_valid(dataset, path):
-    rec = load_real(path)
-    validate(rec.data, path)
+    """... and without a plausibility finding (study.plausibility: no error, no warning on real data)."""
+    import warnings
+
+    from study.schema import RecordWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RecordWarning)
+        rec = load_real(path)
+        validate(rec.data, path)
     assert rec.meta["vessel"] in ("esso_osaka", "kvlcc2_l7")
 
 

@@ -49,7 +49,7 @@ def simulated_current(tmp: Path) -> dict:
     for m, stem in (("zigzag_10_10", "train_zz10"), ("zigzag_20_20", "train_zz20"), ("random_rudder", "train_rr"),
                     ("zigzag_20_10", "val_zz2010"), ("turning_35", "val_turn35")):
         subprocess.run([sys.executable, "-m", "study.simulate", "vessel=kvlcc2_l7", f"maneuver={m}",
-                        "environment=current", "noise=low", "noise.sample_dt=0.1", "sim.duration=300",
+                        "environment=current", "noise=low_relative", "noise.sample_dt=0.1", "sim.duration=300",
                         f"seed={len(stem)}", f"out={tmp / stem}.csv"], check=True, capture_output=True)
     from ..diagnose import run
 
@@ -146,6 +146,14 @@ def _summary(name: str, rep: dict) -> list:
 
 
 def main() -> int:
+    from ..loaders import RealDataMissing, require_real_records
+
+    try:  # the real-data examples need both datasets: say where they were looked for before anything runs
+        for ds in ("esso_osaka", "kvlcc2_hsva"):
+            require_real_records(ds)
+    except RealDataMissing as exc:
+        print(f"study.doctor.examples: {exc}", file=sys.stderr)
+        return 2
     OUT.mkdir(parents=True, exist_ok=True)
     lines = ["# The model doctor's worked examples", "", "Rebuilt by `python -m study.doctor.examples` (see its "
              "docstring for the data and the models); never edited by hand.", "",

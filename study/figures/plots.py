@@ -32,7 +32,10 @@ ESTIMATOR_ORDER = ["ls", "ridge", "lasso", "lssvm", "tlssvm", "lssvm_online", "s
 
 STRUCTURE_ORDER = ["euler", "diff_center", "central", "integral", "smoothed", "output_error"]
 
-NOISE_ORDER = ["none", "low_outputs", "low", "medium", "high"]
+# each level in its absolute definition (conf/noise/<level>.yaml) and its relative one (<level>_relative: the named
+# studies pin it); a study holds one of the two
+NOISE_ORDER = ["none", "low_outputs", "low_outputs_relative", "low", "low_relative", "medium", "medium_relative",
+               "high", "high_relative"]
 
 def _cell(text: str) -> str:
     """Text for a Markdown table cell: a bare | (as in |relative error|) would split the cell."""

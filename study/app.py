@@ -50,14 +50,13 @@ class CollectResults(Callback):
     def _collect(self, config: DictConfig) -> None:
         from .results import ResultStore
 
-        if status() >= EXIT_USAGE:  # refused before any work: nothing is written, not even an empty table
-            return
-
         root = _results_dir(config)
         runs, _ = ResultStore(root).collect()
         print(f"Results: {root / 'runs.parquet'} ({len(runs)} runs), {root / 'params.parquet'}")
 
     def on_run_end(self, config: DictConfig, **kwargs) -> None:
+        if status() >= EXIT_USAGE:  # the run was refused before any work: nothing is written, not even a table
+            return
         self._collect(config)
 
     def on_multirun_end(self, config: DictConfig, **kwargs) -> None:

@@ -1,4 +1,5 @@
 from study.app import main
+from study.cli import run_hydra
 
 if __name__ == "__main__":
-    main()
+    run_hydra(main, "study")

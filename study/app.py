@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import re
 import sys
 import warnings
@@ -19,6 +20,8 @@ from pathlib import Path
 import hydra
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
+
+from .cli import EXIT_FAILED, EXIT_USAGE, fail, reported, run_hydra, status
 
 log = logging.getLogger("study")
 CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
@@ -89,6 +92,8 @@ class CollectResults(Callback):
         print(f"Results: {root / 'runs.parquet'} ({len(runs)} runs), {root / 'params.parquet'}")
 
     def on_run_end(self, config: DictConfig, **kwargs) -> None:
+        if status() >= EXIT_USAGE:  # the run was refused before any work: nothing is written, not even a table
+            return
         self._collect(config)
 
     def on_multirun_end(self, config: DictConfig, **kwargs) -> None:
@@ -111,10 +116,15 @@ def _record_status(path: Path) -> str | None:
         return None
 
 
+#: the number of jobs of the running sweep, set by the sweeper before it launches them (an environment variable:
+#: jobs may run in other processes, which inherit it)
+SWEEP_JOBS_ENV = "STUDY_SWEEP_JOBS"
+
+
 class SweepProgress(Callback):
-    """One line per finished job of a sweep: its number, status and time, and how many runs the results folder
-    holds by status (Hydra itself lists the jobs when it launches them). Works with any launcher: the line is
-    printed by the job's own process."""
+    """One line per finished job of a sweep: its number out of the sweep's total, status (a skipped run's reason)
+    and time, and how many runs the results folder holds by status (Hydra itself lists the jobs when it launches
+    them). Works with any launcher: the line is printed by the job's own process."""
 
     def on_job_end(self, config: DictConfig, job_return, **kwargs) -> None:
         from hydra.core.hydra_config import HydraConfig
@@ -127,7 +137,7 @@ class SweepProgress(Callback):
         except ValueError:
             return
         rec = job_return.return_value if job_return is not None and job_return.status.name == "COMPLETED" else None
-        status = rec.get("status", "?") if isinstance(rec, dict) else "error"
+        status_ = rec.get("status", "?") if isinstance(rec, dict) else "error"
         wall = (rec.get("timings") or {}).get("wall") if isinstance(rec, dict) else None
         root = _results_dir(config) / "records"
         counts = {}
@@ -137,7 +147,9 @@ class SweepProgress(Callback):
                 counts[st] = counts.get(st, 0) + 1
         took = f", {wall:.1f} s" if isinstance(wall, (int, float)) else ""
         resumed = " (resumed)" if isinstance(rec, dict) and rec.get("resumed") else ""
-        print(f"[study] job #{num}: {status}{resumed}{took}; results folder: "
+        why = f" ({_reason(rec)})" if status_ == "skipped" and not resumed else ""
+        total = os.environ.get(SWEEP_JOBS_ENV, "").strip()
+        print(f"[study] job {num + 1}/{total or '?'}: {status_}{resumed}{why}{took}; results folder: "
               + ", ".join(f"{v} {k}" for k, v in sorted(counts.items())), flush=True)
 
 
@@ -151,21 +163,25 @@ def _in_sweep() -> bool:
 
 
 @hydra.main(config_path=CONF_DIR, config_name="config", version_base="1.3")
-def main(cfg: DictConfig) -> dict:
+def main(cfg: DictConfig) -> dict | None:
+    with reported("study"):  # a problem: one line on stderr and the exit status (study.cli)
+        return _run(cfg)
+    return None
+
+
+def _run(cfg: DictConfig) -> dict:
     from .pipeline import run_study, study_config
-    from .records_run import RecordsInputError
+    from .cli import ConfigError
     from .results import RESUME_MODES, ResultStore, run_guarded
+    from .settings import check_run
 
     conf = OmegaConf.to_container(cfg, resolve=True)
-    try:  # a run on the user's files (train=...): read, checksum and check them before anything is written
-        run_conf, data = study_config(conf)
-    except RecordsInputError as e:
-        print(f"study: error: {e}", file=sys.stderr, flush=True)
-        sys.exit(2)
+    check_run(conf)  # a setting that makes no sense is refused before anything is simulated or written
     resume = conf.get("resume") or "code"
     if resume not in RESUME_MODES:
-        print(f"study: error: resume={resume}: expected one of {', '.join(RESUME_MODES)}", file=sys.stderr, flush=True)
-        sys.exit(2)
+        raise ConfigError(f"resume={resume}: expected one of {', '.join(RESUME_MODES)}")
+    # a run on the user's files (train=...): read, checksum and check them before anything is written
+    run_conf, data = study_config(conf)
     store = ResultStore(_results_dir(cfg))
     # in a sweep, a run another live process is computing (an overlapping sweep) is left to it; a single run waits
     record = run_guarded(store, run_conf, lambda: run_study(conf, data=data), seed=int(conf.get("seed", 0)),
@@ -175,11 +191,37 @@ def main(cfg: DictConfig) -> dict:
     if status == "claimed":
         by = record.get("claimed_by") or {}
         msg += f" (being computed by process {by.get('pid', '?')} on {by.get('host', '?')}; left to it)"
-    if status == "failed":
-        msg += "\n" + str(record.get("error", "")).strip().splitlines()[-1]
+    if status == "skipped":
+        msg += f": {_reason(record)}"
     log.info(msg)
+    if status == "failed":
+        print(f"study: error: run {record['run_id']} failed: {_reason(record)} (the traceback: "
+              f"{store.root / 'records'}/{record['run_id']}.json, or python -m study.results show)",
+              file=sys.stderr, flush=True)
+        if not _in_sweep():  # a sweep goes on; it ends with its count of failed runs (sweep_finished)
+            fail(EXIT_FAILED)
     return record
 
 
+def _reason(record: dict) -> str:
+    """A skipped run's reason, or a failed run's error (the last line of its traceback)."""
+    lines = str(record.get("error") or "").strip().splitlines()
+    return lines[-1].strip() if lines else "(no reason recorded)"
+
+
+def sweep_finished(returns: list) -> None:
+    """After a sweep (called by the sweeper with every job's return): one line counting the jobs by status, and
+    a non-zero exit status when a run failed or a job ended in an error (each was reported when it happened)."""
+    counts: dict = {}
+    for r in returns:
+        st = r.get("status", "?") if isinstance(r, dict) else "error"
+        counts[st] = counts.get(st, 0) + 1
+    bad = counts.get("failed", 0) + counts.get("error", 0)
+    print(f"[study] sweep finished: {len(returns)} jobs, " + ", ".join(f"{v} {k}" for k, v in sorted(counts.items()))
+          + (f"; exit status {EXIT_FAILED}: {bad} run(s) failed or ended in an error" if bad else ""), flush=True)
+    if bad:
+        fail(EXIT_FAILED)
+
+
 if __name__ == "__main__":
-    main()
+    run_hydra(main, "study")

@@ -8,15 +8,16 @@ makes them), HSVA's KVLCC2 ``.dat`` files and the Esso Osaka CSVs of ``../shared
 """
 from __future__ import annotations
 
+import contextlib
 import glob as globmod
 import hashlib
-import sys
 from pathlib import Path
 
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from .app import CONF_DIR
+from .cli import reported, run_hydra
 
 
 def _is_real(path: Path) -> bool:
@@ -129,14 +130,39 @@ def log_runs(conf: dict, doctor, rep: dict, train, validate) -> list:
     return ids
 
 
+@contextlib.contextmanager
+def claimed(out: Path, overwrite: bool):
+    """Hold ``out`` for one doctor while it works: a second one writing into the same folder is refused at once
+    (an exclusive lock, ``<out>/.report.lock``, released when the process ends however it ends), and the folder
+    is checked again for a report under the lock (another run may have finished one meanwhile)."""
+    from filelock import FileLock, Timeout
+
+    from .cli import OutputExistsError
+    from .settings import existing_report
+
+    out.mkdir(parents=True, exist_ok=True)
+    lock = FileLock(str(out / ".report.lock"))
+    try:
+        lock.acquire(timeout=0)
+    except Timeout:
+        raise OutputExistsError(f"out={out}: another python -m study.diagnose is writing a report there") from None
+    try:
+        there = existing_report(out)
+        if there and not overwrite:
+            raise OutputExistsError(f"out={out}: {out} already holds {', '.join(there)}; refusing to overwrite a "
+                                    "report (overwrite=true to overwrite it, or another out=)")
+        yield out
+    finally:
+        lock.release()
+
+
 def run(conf: dict) -> dict:
     """Run the doctor from a resolved config (what the CLI and the tests call)."""
     from .doctor.diagnose import Doctor, Options, write_report
+    from .settings import check_diagnose
     from .sim.effects import ShallowWater, apply_effects
 
-    out = Path(conf["out"])
-    if (out / "report.json").exists() and not conf.get("overwrite"):  # before any work
-        raise FileExistsError(f"{out / 'report.json'} exists; refusing to overwrite it (pass overwrite=true)")
+    out = check_diagnose(conf)  # before any work: records and out given, no report there, thresholds in range
     read = {"states": conf.get("states") or "measured", "state_options": conf.get("state_options") or None}
     train = load_records(conf["train"], **read)
     validate = load_records(conf["validate"], **read) if conf.get("validate") else []
@@ -153,10 +179,11 @@ def run(conf: dict) -> dict:
                   candidates=tuple(cands) if cands is not None else None, structure=conf.get("structure"),
                   effect_path=tuple([path] if isinstance(path, str) else path), checks=str(conf.get("checks", "error")),
                   anchor=float(conf.get("anchor") or 0.0))
-    doctor = Doctor(vessel_cfg, conf["model"], train, validate, opt)
-    doctor.run()
-    rep = write_report(doctor, conf["out"], conf["vessel"]["name"], conf["model"]["name"],
-                       overwrite=bool(conf.get("overwrite")))
+    with claimed(out, bool(conf.get("overwrite"))):
+        doctor = Doctor(vessel_cfg, conf["model"], train, validate, opt)
+        doctor.run()
+        rep = write_report(doctor, conf["out"], conf["vessel"]["name"], conf["model"]["name"],
+                           overwrite=bool(conf.get("overwrite")))
     truths = _truths(train + validate)
     if truths:
         rep["hidden_effects"] = truths
@@ -167,10 +194,15 @@ def run(conf: dict) -> dict:
 
 @hydra.main(config_path=CONF_DIR, config_name="diagnose", version_base="1.3")
 def main(cfg: DictConfig) -> None:
-    conf = OmegaConf.to_container(cfg, resolve=True)
+    with reported("study.diagnose"):  # a problem: one line on stderr and the exit status (study.cli)
+        _main(OmegaConf.to_container(cfg, resolve=True))
+
+
+def _main(conf: dict) -> None:
     rep = run(conf)
     out = Path(conf["out"]).resolve()
     print(rep["verdict"])
+
     def step(s):
         e = s.get("scored_error", s["validation_error"])
         txt = f"{s['step']} " + (f"{e:.3g}" if e == e and e != float("inf") else "diverged")
@@ -186,4 +218,4 @@ def main(cfg: DictConfig) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run_hydra(main, "study.diagnose")

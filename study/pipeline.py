@@ -236,6 +236,9 @@ def run_study(conf: dict, data=None) -> dict:
 
     With ``conf['train']`` set the run is on the user's records (``study.records_run``): ``data`` are the records
     ``study_config`` read (read here when None)."""
+    from .settings import check_run
+
+    check_run(conf)  # a setting that makes no sense is refused, named (the app checks it before any work too)
     if conf.get("train") is not None:
         from .records_run import load, run_on_records
 

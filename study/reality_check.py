@@ -2,8 +2,9 @@
 
 ``python -m study.reality_check`` simulates the 10/10 and 20/10 zigzags, both sides first, from the measured
 approach speed, with the published MMG coefficients (Yasukawa & Yoshimura 2015) and the helm rate of the HSVA
-report, and puts overshoots and periods beside the measured ones in ``paper_figs/kvlcc2_zigzags_vs_tank.{csv,md}``
-and ``paper_figs/kvlcc2_zigzags_vs_tank.{png,pdf}``.
+report, and puts overshoots and periods beside the measured ones in ``<out>/kvlcc2_zigzags_vs_tank.{csv,md}``
+and ``<out>/kvlcc2_zigzags_vs_tank.{png,pdf}`` (default ``reality_check/`` in the current folder; the committed
+ones: ``--out paper_figs --overwrite``).
 
 Two propeller settings are simulated, because they are the two defensible readings of "the HSVA test":
 ``mmg_self_propulsion`` (n solved so that the MMG model runs straight at the measured speed: the model is
@@ -13,9 +14,7 @@ the speed, as in the tank). Measured data: HSVA (A. Cura Hochbaum) 2006, redistr
 """
 from __future__ import annotations
 
-import argparse
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +27,9 @@ from .sim import load_vessel, simulate
 
 RUNS = ("Z_10_10_P", "Z_10_10_S", "Z_20_10_P", "Z_20_10_S")
 OUT_DIR = Path(__file__).resolve().parents[1] / "paper_figs"
+#: the command's default output: a folder of the current directory, never a committed one
+DEFAULT_OUT = Path("reality_check")
+FILES = tuple(f"kvlcc2_zigzags_vs_tank.{e}" for e in ("csv", "md", "png", "pdf"))
 
 
 def _execution(df: pd.DataFrame) -> tuple[float, float]:
@@ -131,19 +133,26 @@ def write_outputs(table: pd.DataFrame, traces: dict, out_dir: Path = OUT_DIR) ->
     return paths
 
 
-def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default=str(OUT_DIR))
+def main(argv=None) -> int:
+    from .cli import OutputExistsError, parser
+
+    ap = parser("study.reality_check", __doc__.splitlines()[0])
+    ap.add_argument("--out", default=str(DEFAULT_OUT), help=f"output folder (default {DEFAULT_OUT}/ in the current "
+                    "folder; the committed outputs: --out paper_figs --overwrite)")
+    ap.add_argument("--overwrite", action="store_true", help="replace the outputs already in the output folder")
     args = ap.parse_args(argv)
-    try:
-        table, traces = build_table()
-    except RealDataMissing as exc:  # one line: where the data were looked for and how to point at them
-        print(f"study.reality_check: {exc}", file=sys.stderr)
-        raise SystemExit(2) from None
+    there = [f for f in FILES if (Path(args.out) / f).exists()]
+    if there and not args.overwrite:  # before any work
+        raise OutputExistsError(f"--out {args.out}: already holds {', '.join(there)}; refusing to overwrite them "
+                                "(--overwrite to overwrite them, or another --out)")
+    table, traces = build_table()
     for p in write_outputs(table, traces, Path(args.out)):
         print(f"wrote {p}")
     print(table.round(2).to_string(index=False))
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    from .cli import run
+
+    run(main, "study.reality_check")

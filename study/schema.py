@@ -324,11 +324,29 @@ def write_record(record: Record, path, overwrite: bool = False) -> Path:
             table = table.replace_schema_metadata({**(table.schema.metadata or {}),
                                                    META_KEY: json.dumps(meta).encode()})
             pq.write_table(table, tmp)
-        os.replace(tmp, path)
+        if overwrite:
+            os.replace(tmp, path)
+        else:
+            _create_exclusively(tmp, path)
     finally:
         if tmp.exists():
             tmp.unlink()
     return path
+
+
+def _create_exclusively(tmp: Path, path: Path) -> None:
+    """Give the finished ``tmp`` the name ``path`` only if nothing has that name: of two processes writing the
+    same file, one wins and the other gets ``FileExistsError`` (a hard link is created atomically and never
+    replaces; ``os.replace`` would silently let the second writer's file replace the first's)."""
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        raise FileExistsError(f"{path} exists (written meanwhile by another process); refusing to overwrite it "
+                              "(pass overwrite=True / overwrite=true)") from None
+    except OSError:  # a file system without hard links: claim the name exclusively, then move the file onto it
+        fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        os.close(fd)
+        os.replace(tmp, path)
 
 
 def read_records(spec, min_samples: int = 20, states: str = "measured",

@@ -13,6 +13,7 @@ import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
 from .app import CONF_DIR
+from .cli import reported, run_hydra
 
 
 def make_record(conf: dict):
@@ -22,6 +23,12 @@ def make_record(conf: dict):
     from .schema import Record
     from .sim import default_dt, simulate
 
+    from .settings import check_simulation
+
+    check_simulation(conf)  # zero, negative or non-finite settings are refused, naming the setting
+    log = conf.get("rudder_log", "both")
+    if log not in ("both", "actual", "command"):
+        raise ValueError(f"rudder_log={log!r}: expected 'both', 'actual' or 'command'")
     truth, _ = vessels_for(conf)
     man = man_mod.get_maneuver(conf["maneuver"])
     sim = conf.get("sim") or {}
@@ -30,9 +37,6 @@ def make_record(conf: dict):
     seed = int(conf.get("seed", 0))
     clean = simulate(truth, man, dt=dt, duration=T, seed=seed)
     df = measurement(conf, seed=seed, vessel=truth).apply(clean)
-    log = conf.get("rudder_log", "both")
-    if log not in ("both", "actual", "command"):
-        raise ValueError(f"rudder_log={log!r}: expected 'both', 'actual' or 'command'")
     if log == "command":  # the measured 'delta' of an autopilot log is what the steering gear was told
         df["delta"] = np.interp(df["time"], clean["time"], clean["delta_cmd"])
     if log != "both":
@@ -58,15 +62,20 @@ def make_record(conf: dict):
 
 @hydra.main(config_path=CONF_DIR, config_name="simulate", version_base="1.3")
 def main(cfg: DictConfig) -> None:
-    from .schema import write_record
+    with reported("study.simulate"):  # a problem: one line on stderr and the exit status (study.cli)
+        _write(OmegaConf.to_container(cfg, resolve=True))
 
-    conf = OmegaConf.to_container(cfg, resolve=True)
+
+def _write(conf: dict) -> None:
+    from .schema import write_record
+    from .settings import check_simulate
+
+    path = check_simulate(conf).resolve()  # out= given, a record type, not there: checked before simulating
     rec = make_record(conf)
-    path = Path(conf["out"]).expanduser().resolve()
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_record(rec, path, overwrite=bool(conf.get("overwrite", False)))
+    write_record(rec, path, overwrite=bool(conf.get("overwrite", False)))  # created exclusively
     print(f"wrote {path} ({len(rec.data)} samples, {rec.data['time'].iloc[-1]:.1f} s)")
 
 
 if __name__ == "__main__":
-    main()
+    run_hydra(main, "study.simulate")

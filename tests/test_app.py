@@ -65,6 +65,9 @@ def test_two_process_sweep_resume_and_failure(tmp_path):
              "structure=euler,central"]
     p = _run_app(sweep, results)
     assert p.returncode == 0, p.stderr[-3000:]
+    # each job prints its number out of the sweep's total, also from the launcher's worker processes
+    assert sorted(ln.split(":")[0] for ln in p.stdout.splitlines() if ln.startswith("[study] job ")) == \
+        [f"[study] job {i}/4" for i in range(1, 5)], p.stdout
     recs = _records(results)
     assert len(recs) == 4 and all(r["status"] == "ok" for r in recs.values())
     runs = pd.read_parquet(results / "runs.parquet")
@@ -76,9 +79,10 @@ def test_two_process_sweep_resume_and_failure(tmp_path):
     assert p.returncode == 0, p.stderr[-3000:]
     assert p.stdout.count("(already finished, resumed)") == 3
     assert len(_records(results)) == 4
-    # a failing run (h/T below every formula's range) is recorded, and the sweep goes on
+    # a failing run (h/T below every formula's range) is recorded, the sweep goes on, and ends with status 1
     p = _run_app(["-m", "experiment=tiny", "noise=none", "depth.h_T=1.0,2.0"], results)
-    assert p.returncode == 0, p.stderr[-3000:]
+    assert p.returncode == 1, p.stderr[-3000:]
+    assert "sweep finished: 2 jobs, 1 failed, 1 ok" in p.stdout and "h/T = 1.0" in p.stderr
     recs = _records(results)
     failed = [r for r in recs.values() if r["status"] == "failed"]
     assert len(failed) == 1 and "h/T = 1.0" in failed[0]["error"]

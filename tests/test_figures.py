@@ -42,7 +42,7 @@ def test_smoke_study_runs_everything(smoke):
     skipped = runs[runs.status == "skipped"]
     assert len(skipped) and skipped["error"].str.contains("output error").all()
     assert set(ok.loc[ok["cfg_structure.name"] == "output_error", "cfg_estimator.name"]) == {"de", "emcee"}
-    assert "[study] job #" in p.stdout  # the sweep shows its progress
+    assert "[study] job 66/66: " in p.stdout or p.stdout.count("/66: ") == 66  # the sweep shows its progress
 
 
 @pytest.fixture(scope="module")

@@ -326,6 +326,40 @@ def test_batch_loop_is_simd_code():
     assert len(packed) > 300
 
 
+_ASM_AFTER_CACHE = """
+import numpy as np, llvmlite.binding as llvm
+from study.sim import integrator, load_vessel, simulate_batch
+v = load_vessel("kt_mariner")
+simulate_batch(v, "zigzag_10_10", np.repeat(v.params[:, None], 8, axis=1), duration=5.0)  # compiles or loads
+reg = "zmm" if llvm.get_host_cpu_features().get("avx512f", False) else "ymm"
+asm = integrator(v.kind_name).run_loop_asm()
+print(sum(1 for ln in asm.splitlines() if reg in ln and ln.split()[0].endswith("pd")))
+"""
+
+
+@pytest.mark.slow
+def test_the_assembly_is_found_whatever_the_cache_holds(tmp_path):
+    """The quickstart's order (issue 12): a first process fills numba's on-disk cache, a second one loads the
+    integrator from it and asks for the loop's assembly; both find the same packed code. A cache of its own
+    (NUMBA_CACHE_DIR), so the two states are known. About 20 s of compilation, hence slow."""
+    import llvmlite.binding as llvm
+    import os
+    import subprocess
+    import sys
+
+    if not llvm.get_host_cpu_features().get("avx2", False):
+        pytest.skip("no AVX2 on this CPU")
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path), OPENBLAS_NUM_THREADS="1")
+    counts = []
+    for _ in range(2):
+        p = subprocess.run([sys.executable, "-c", _ASM_AFTER_CACHE], env=env, capture_output=True, text=True,
+                           timeout=600)
+        assert p.returncode == 0, p.stderr[-2000:]
+        counts.append(int(p.stdout.split()[-1]))
+    assert any(tmp_path.rglob("*.nbi")), "the first process filled no cache"
+    assert counts[0] == counts[1] > 20, counts
+
+
 # ------------------------------------------------------------------------------------------ fast math
 
 

@@ -9,11 +9,18 @@ an unknown key still fails before any job runs, in about 25 compositions instead
 a particular combination of values would raise surfaces when the launcher composes that job; the runs that
 finished before it stay in the results table and the next start resumes them. `validate_all: true` restores
 Hydra's behaviour. Hydra only loads sweepers from the `hydra_plugins` namespace package, hence this module.
+
+Each composed config is also checked by the study's own rules (`study.settings.check_run`: zero, negative or
+non-finite values, unknown estimator hyper-parameters), so such a sweep is refused before any job runs. The
+sweep's number of jobs is exported (`STUDY_SWEEP_JOBS`) for the progress lines (`job 12/66`), and when the
+sweep ends `study.app.sweep_finished` counts its jobs by status (a failed run makes the command's exit status
+non-zero).
 """
 # no `from __future__ import annotations`: Hydra execs plugin modules outside sys.modules, and dataclasses
 # then cannot resolve string annotations
 
 import logging
+import os
 import time
 from dataclasses import dataclass
 from typing import Dict, Optional, Sequence
@@ -58,6 +65,34 @@ class CoveringSweeper(BasicSweeper):
     def validate_batch_is_legal(self, batch: Sequence[Sequence[str]]) -> None:
         jobs = list(batch) if self.validate_all else covering_jobs(batch)
         tic = time.perf_counter()
-        super().validate_batch_is_legal(jobs)
+        check = _study_check()
+        for overrides in jobs:  # BasicSweeper.validate_batch_is_legal, with the study's own check added
+            cfg = self.hydra_context.config_loader.load_sweep_config(master_config=self.config,
+                                                                     sweep_overrides=list(overrides))
+            if check is not None:
+                from omegaconf import OmegaConf
+
+                task = OmegaConf.to_container(cfg, resolve=False)
+                task.pop("hydra", None)  # the job's own config, as its task function gets it
+                check(OmegaConf.to_container(OmegaConf.create(task), resolve=True))
+        os.environ["STUDY_SWEEP_JOBS"] = str(sum(len(b) for b in self.overrides or [batch]))
         log.info(f"Composed {len(jobs)} of {len(batch)} job configs to validate the sweep "
                  f"({time.perf_counter() - tic:.1f} s)")
+
+    def sweep(self, arguments):
+        returns = super().sweep(arguments)
+        try:
+            from study.app import sweep_finished
+        except ImportError:
+            return returns
+        sweep_finished([r.return_value for batch in returns for r in batch])
+        return returns
+
+
+def _study_check():
+    """The study's configuration check (None outside the study package)."""
+    try:
+        from study.settings import check_run
+    except ImportError:
+        return None
+    return check_run

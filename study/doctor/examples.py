@@ -13,19 +13,23 @@
 5. ``kvlcc2_hsva_identified``: the same records, the MMG hull identified from them (anchored to the published
    set): the user's normal case.
 
-Each writes ``paper_figs/doctor/<example>/`` (report.html, report.json, figures/) and the summary
-``paper_figs/doctor/README.md``. The real data are read in place (``../shared/data/real``); an example whose
-data are missing is skipped and listed as such. The runs are not logged in the results table.
+Each writes ``<out>/<example>/`` (report.html, report.json, figures/) and the summary ``<out>/README.md``. The
+committed ones are ``paper_figs/doctor/``: ``python -m study.doctor.examples --out paper_figs/doctor --overwrite``
+rebuilds them; by default the examples go to ``doctor_examples/`` in the current folder, and a folder that holds a
+report is never replaced without ``--overwrite``. The real data are read in place (``../shared/data/real``); an
+example whose data are missing is skipped and listed as such. The runs are not logged in the results table.
 """
 from __future__ import annotations
 
 import json
-import sys
 import tempfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
-OUT = REPO / "paper_figs" / "doctor"
+#: the committed examples (rebuilt only when asked: --out paper_figs/doctor)
+COMMITTED = REPO / "paper_figs" / "doctor"
+#: where the examples go by default: a folder of the current directory, never a committed one
+DEFAULT_OUT = Path("doctor_examples")
 
 
 def _conf(**over) -> dict:
@@ -38,13 +42,14 @@ def _conf(**over) -> dict:
         cfg = compose(config_name="diagnose", overrides=[f"{k}={v}" for k, v in over.items()
                                                          if k in ("vessel", "model")])
     conf = OmegaConf.to_container(cfg, resolve=True)
+    conf.update(log_runs=False, overwrite=False)
     conf.update({k: v for k, v in over.items() if k not in ("vessel", "model")})
-    conf.update(overwrite=True, log_runs=False)
     return conf
 
 
-def simulated_current(tmp: Path) -> dict:
+def simulated_current(tmp: Path, out: Path = DEFAULT_OUT, overwrite: bool = False) -> dict:
     import subprocess
+    import sys
 
     for m, stem in (("zigzag_10_10", "train_zz10"), ("zigzag_20_20", "train_zz20"), ("random_rudder", "train_rr"),
                     ("zigzag_20_10", "val_zz2010"), ("turning_35", "val_turn35")):
@@ -54,19 +59,19 @@ def simulated_current(tmp: Path) -> dict:
     from ..diagnose import run
 
     return run(_conf(vessel="kvlcc2_l7", train=f"{tmp}/train_*.csv", validate=f"{tmp}/val_*.csv",
-                     out=str(OUT / "simulated_current")))
+                     out=str(out / "simulated_current"), overwrite=overwrite))
 
 
-def esso_osaka() -> dict:
+def esso_osaka(out: Path = DEFAULT_OUT, overwrite: bool = False) -> dict:
     from ..diagnose import run
     from ..loaders import real_data_dir
 
     d = real_data_dir() / "esso_osaka_frt" / "data"
     return run(_conf(vessel="esso_osaka", train=f"{d}/zigzag/*.csv", validate=f"{d}/turning/*.csv",
-                     out=str(OUT / "esso_osaka")))
+                     out=str(out / "esso_osaka"), overwrite=overwrite))
 
 
-def esso_osaka_identified() -> dict:
+def esso_osaka_identified(out: Path = DEFAULT_OUT, overwrite: bool = False) -> dict:
     """Esso Osaka's MMG hull identified from its zigzags and random-rudder runs (the data papers' training
     set), anchored to its empirical prior (the config's hull), validated on all 14 measured turning circles: a
     turn from zigzags, on real records."""
@@ -75,19 +80,19 @@ def esso_osaka_identified() -> dict:
 
     d = real_data_dir() / "esso_osaka_frt" / "data"
     return run(_conf(vessel="esso_osaka", model="mmg_hull", train=f"{d}/zigzag/*.csv,{d}/random/*.csv",
-                     validate=f"{d}/turning/*.csv", out=str(OUT / "esso_osaka_identified")))
+                     validate=f"{d}/turning/*.csv", out=str(out / "esso_osaka_identified"), overwrite=overwrite))
 
 
-def kvlcc2_hsva() -> dict:
+def kvlcc2_hsva(out: Path = DEFAULT_OUT, overwrite: bool = False) -> dict:
     from ..diagnose import run
     from ..loaders import real_data_dir
 
     d = real_data_dir() / "kvlcc2_hsva" / "raw_data"
     return run(_conf(vessel="kvlcc2_l7", train=f"{d}/HSVA_CPMC_KVLCC2_Z_*_0?.dat",
-                     validate=f"{d}/HSVA_CPMC_KVLCC2_Z_*_10_?.dat", out=str(OUT / "kvlcc2_hsva")))
+                     validate=f"{d}/HSVA_CPMC_KVLCC2_Z_*_10_?.dat", out=str(out / "kvlcc2_hsva"), overwrite=overwrite))
 
 
-def kvlcc2_hsva_identified() -> dict:
+def kvlcc2_hsva_identified(out: Path = DEFAULT_OUT, overwrite: bool = False) -> dict:
     """The HSVA zigzags again, with the MMG hull identified from them (anchored to the published set): the
     user's normal case."""
     from ..diagnose import run
@@ -95,7 +100,7 @@ def kvlcc2_hsva_identified() -> dict:
 
     d = real_data_dir() / "kvlcc2_hsva" / "raw_data"
     return run(_conf(vessel="kvlcc2_l7", model="mmg_hull", train=f"{d}/HSVA_CPMC_KVLCC2_Z_*_0?.dat",
-                     validate=f"{d}/HSVA_CPMC_KVLCC2_Z_*_10_?.dat", out=str(OUT / "kvlcc2_hsva_identified")))
+                     validate=f"{d}/HSVA_CPMC_KVLCC2_Z_*_10_?.dat", out=str(out / "kvlcc2_hsva_identified"), overwrite=overwrite))
 
 
 def _turns(rep: dict) -> list:
@@ -145,16 +150,29 @@ def _summary(name: str, rep: dict) -> list:
     return lines
 
 
-def main() -> int:
-    from ..loaders import RealDataMissing, require_real_records
+def main(argv=None) -> int:
+    from ..cli import OutputExistsError, parser
+    from ..settings import existing_report
 
-    try:  # the real-data examples need both datasets: say where they were looked for before anything runs
+    ap = parser("study.doctor.examples", "The model doctor's five worked examples (see the module's docstring).")
+    ap.add_argument("--out", default=str(DEFAULT_OUT),
+                    help=f"output folder (default {DEFAULT_OUT}/ in the current folder; the committed examples: "
+                         f"--out paper_figs/doctor --overwrite)")
+    ap.add_argument("--overwrite", action="store_true", help="replace the reports already in the output folder")
+    ap.add_argument("--only", nargs="+", choices=list(EXAMPLES), default=None, help="run only these examples")
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    names = args.only or list(EXAMPLES)
+    if any(n != "simulated_current" for n in names):  # the real-data examples: say where the data were looked for
+        from ..loaders import require_real_records
+
         for ds in ("esso_osaka", "kvlcc2_hsva"):
-            require_real_records(ds)
-    except RealDataMissing as exc:
-        print(f"study.doctor.examples: {exc}", file=sys.stderr)
-        return 2
-    OUT.mkdir(parents=True, exist_ok=True)
+            require_real_records(ds)  # RealDataMissing (a FileNotFoundError): one line, exit 2 (study.cli)
+    there = [f"{n}/{f}" for n in names for f in existing_report(out / n)]
+    if there and not args.overwrite:  # before any work
+        raise OutputExistsError(f"--out {out}: already holds {', '.join(there[:3])}{' ...' if len(there) > 3 else ''}"
+                                "; refusing to overwrite them (--overwrite to overwrite them, or another --out)")
+    out.mkdir(parents=True, exist_ok=True)
     lines = ["# The model doctor's worked examples", "", "Rebuilt by `python -m study.doctor.examples` (see its "
              "docstring for the data and the models); never edited by hand.", "",
              "Data: Esso Osaka free-running tests, Osaka University (Wakita et al. 2022; Miyauchi et al. 2022), "
@@ -162,22 +180,31 @@ def main() -> int:
              "HSVA free-running tests, SIMMAN 2008 (Stern et al. 2011). The data are read in place from "
              "`../shared/data/real`, never copied here.", ""]
     with tempfile.TemporaryDirectory() as tmp:
-        for name, fn in (("simulated_current", lambda: simulated_current(Path(tmp))), ("esso_osaka", esso_osaka),
-                         ("esso_osaka_identified", esso_osaka_identified), ("kvlcc2_hsva", kvlcc2_hsva),
-                         ("kvlcc2_hsva_identified", kvlcc2_hsva_identified)):
+        for name in names:
+            fn = EXAMPLES[name]
+            kw = {"out": out, "overwrite": args.overwrite}
             try:
-                rep = fn()
-            except FileNotFoundError as e:
+                rep = fn(Path(tmp), **kw) if name == "simulated_current" else fn(**kw)
+            except FileNotFoundError as e:  # an example whose data are missing is listed, not run
                 lines += [f"### {name}", "", f"not run: {e}", ""]
                 continue
             print(f"{name}: {rep['verdict']}")
             lines += _summary(name, rep)
-            (OUT / name / "summary.json").write_text(json.dumps({"verdict": rep["verdict"], "ladder": rep["ladder"],
+            (out / name / "summary.json").write_text(json.dumps({"verdict": rep["verdict"], "ladder": rep["ladder"],
                                                                   "missing_effect": rep["missing_effect"]},
                                                                  indent=1, default=float))
-    (OUT / "README.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    (out / "README.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
+    print(f"examples in {out.resolve()}")
     return 0
 
 
+#: the examples in the order the summary lists them
+EXAMPLES = {"simulated_current": simulated_current, "esso_osaka": esso_osaka,
+            "esso_osaka_identified": esso_osaka_identified, "kvlcc2_hsva": kvlcc2_hsva,
+            "kvlcc2_hsva_identified": kvlcc2_hsva_identified}
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    from ..cli import run
+
+    run(main, "study.doctor.examples")

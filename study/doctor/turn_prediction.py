@@ -18,13 +18,12 @@ Choices, labelled:
   far from another source's figure says the records and that source disagree, not that either is right.
 
 ``python -m study.doctor.turn_prediction`` writes the KVLCC2 case (HSVA's zigzags, ``../shared/data/real``) to
-``paper_figs/doctor/kvlcc2_turn_from_zigzags.{md,csv}``: the published set against the hull identified from the
-zigzags under the doctor's settings and under other reasonable ones.
+``<out>/kvlcc2_turn_from_zigzags.{md,csv}`` (default ``turn_prediction/`` in the current folder; the committed
+table: ``--out paper_figs/doctor --overwrite``): the published set against the hull identified from the zigzags
+under the doctor's settings and under other reasonable ones.
 """
 from __future__ import annotations
 
-import argparse
-import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -35,7 +34,11 @@ from .. import metrics as M
 
 __all__ = ["predict_turn", "kvlcc2_hsva_table"]
 
-OUT = Path(__file__).resolve().parents[2] / "paper_figs" / "doctor"
+#: the committed table's folder (rebuilt only when asked: --out paper_figs/doctor --overwrite)
+COMMITTED = Path(__file__).resolve().parents[2] / "paper_figs" / "doctor"
+#: the default output: a folder of the current directory, never a committed one
+DEFAULT_OUT = Path("turn_prediction")
+FILES = ("kvlcc2_turn_from_zigzags.csv", "kvlcc2_turn_from_zigzags.md")
 
 
 def _turn(df: pd.DataFrame, L: float) -> tuple[float, float]:
@@ -139,7 +142,7 @@ def kvlcc2_hsva_table(data_dir=None, draws: int = 64) -> pd.DataFrame:
 
 def write_table(df: pd.DataFrame, out: Path, draws: int = 64) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
-    csv, md = out / "kvlcc2_turn_from_zigzags.csv", out / "kvlcc2_turn_from_zigzags.md"
+    csv, md = (out / f for f in FILES)
     df.to_csv(csv, index=False, float_format="%.4g")
     show = df.copy()
     show["TD [L] (90 % of posterior draws)"] = [
@@ -163,18 +166,23 @@ def write_table(df: pd.DataFrame, out: Path, draws: int = 64) -> list[Path]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m study.doctor.turn_prediction",
-                                 description="KVLCC2's 35 deg turn predicted from HSVA's zigzags, with intervals")
-    ap.add_argument("--out", default=str(OUT), help=f"output folder (default {OUT})")
+    from ..cli import OutputExistsError, parser
+
+    ap = parser("study.doctor.turn_prediction", "KVLCC2's 35 deg turn predicted from HSVA's zigzags, with intervals")
+    ap.add_argument("--out", default=str(DEFAULT_OUT), help=f"output folder (default {DEFAULT_OUT}/ in the current "
+                    "folder; the committed table: --out paper_figs/doctor --overwrite)")
+    ap.add_argument("--overwrite", action="store_true", help="replace the table already in the output folder")
     ap.add_argument("--data", default=None, help="folder of HSVA's .dat files (default: the real-data folder)")
     args = ap.parse_args(argv)
     from ..loaders import real_data_dir
 
+    there = [f for f in FILES if (Path(args.out) / f).exists()]
+    if there and not args.overwrite:  # before any work
+        raise OutputExistsError(f"--out {args.out}: already holds {', '.join(there)}; refusing to overwrite them "
+                                "(--overwrite to overwrite them, or another --out)")
     d = Path(args.data) if args.data else real_data_dir() / "kvlcc2_hsva" / "raw_data"
     if not list(d.glob("HSVA_CPMC_KVLCC2_Z_*_0?.dat")):
-        print(f"turn_prediction: no HSVA zigzag files (HSVA_CPMC_KVLCC2_Z_*_0?.dat) in {d}; give --data",
-              file=sys.stderr)
-        return 2
+        raise FileNotFoundError(f"no HSVA zigzag files (HSVA_CPMC_KVLCC2_Z_*_0?.dat) in {d}; give --data")
     df = kvlcc2_hsva_table(d)
     for p in write_table(df, Path(args.out)):
         print(p)
@@ -183,4 +191,6 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from ..cli import run
+
+    run(main, "study.doctor.turn_prediction")

@@ -1,5 +1,4 @@
-import sys
-
+from ..cli import run
 from . import main
 
-sys.exit(main())
+run(main, "study.figures")

@@ -12,6 +12,13 @@ Outputs and weights: the channels compared (``outputs``; default the model's own
 r and psi for Nomoto models) are each divided by their spread over the records, so that
 ``cost = sum_c SSE_c / s_c^2 / N``, a mean normalised squared error (dimensionless, comparable across
 channels). ``sse`` gives the raw per-channel sums for a likelihood with one noise scale per channel.
+
+Divergence is a result, not a crash: a candidate whose replay leaves the physical envelope (:data:`ENVELOPE`:
+speed, yaw rate, sway) or overflows is stopped there -- none of its outputs count -- and penalised
+(:data:`DIVERGED`); the problem counts such candidates (``n_diverged``, in the run's metrics as
+``oe_diverged_candidates``). Before, a replay at 8e189 was finite, escaped the penalty, and made the Gauss-Newton
+polish fail ("array must not contain infs or NaNs"); the polish is now skipped when its Jacobian cannot be
+formed (a perturbed candidate diverged), keeping the best point it had (``oe_polish_skipped``).
 """
 from __future__ import annotations
 
@@ -26,6 +33,23 @@ from .structures import segments
 STATE = ("u", "v", "r", "x0", "y0", "psi")
 #: cost of a simulation that diverged (NaN/inf): worse than any finite one, but finite for the optimisers
 DIVERGED = 1e12
+#: a replay is stopped as diverged when it leaves this envelope: speed over 5 times the service speed, yaw rate
+#: over 20 U0/L (a full turn in a third of a ship length's travel; both as the doctor's, study.doctor.fit), sway
+#: velocity over 2 U0 (a ship sliding sideways at twice its service speed). Assumption: no ship manoeuvres there,
+#: so no record can ask for it.
+ENVELOPE = {"speed_U0": 5.0, "r_U0_L": 20.0, "v_U0": 2.0}
+
+
+def leaves_envelope(sim: np.ndarray, U0: float, L: float) -> np.ndarray:
+    """(B,) True for each member of a replay ``sim`` (n, >= 6 columns u, v, r, x0, y0, psi, B) that overflows
+    or leaves :data:`ENVELOPE` of a ship of service speed ``U0`` and length ``L``."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        u, v, r = sim[:, 0, :], sim[:, 1, :], sim[:, 2, :]
+        out = ~np.all(np.isfinite(sim[:, :6, :]), axis=(0, 1))
+        out |= np.any(np.hypot(u, v) > ENVELOPE["speed_U0"] * U0, axis=0)
+        out |= np.any(np.abs(r) > ENVELOPE["r_U0_L"] * U0 / L, axis=0)
+        out |= np.any(np.abs(v) > ENVELOPE["v_U0"] * U0, axis=0)
+    return out
 
 
 class OutputErrorProblem:
@@ -107,6 +131,9 @@ class OutputErrorProblem:
         self.bounds = None if bounds is None else np.vstack([np.asarray(bounds, float).reshape(-1, 2),
                                                              np.asarray(init_b).reshape(-1, 2)])
         self.n_sim = 0  # simulations run (each batch member counts once)
+        self.n_diverged = 0  # of which left the envelope (see ENVELOPE)
+        self.polish_skipped = 0  # local fits stopped because a replay of their Jacobian diverged
+        self.last_diverged = np.zeros(0, bool)  # the members of the last batch that diverged
 
     @property
     def k(self) -> int:
@@ -125,14 +152,21 @@ class OutputErrorProblem:
         B = theta.shape[1]
         P = self.model.oe_pack(theta[:self.k_model])
         out = []
+        gone = np.zeros(B, bool)
         for i, s in enumerate(self.segments):
             y0 = np.repeat(s["state0"][:, None], B, axis=1)
             for j, (seg, row, _) in enumerate(self.init_params):
                 if seg == i:
                     y0[row] = theta[self.k_model + j]
             sim = replay(self.vessel, s["t"], s["delta"], s["n"], y0, P=P, substeps=self.substeps)
+            gone |= leaves_envelope(sim, self.vessel.U0, self.vessel.L)
             out.append(sim[:, self._col, :])
-        self.n_sim += theta.shape[1]
+        if gone.any():  # a diverged candidate is stopped: none of its outputs count
+            for o in out:
+                o[:, :, gone] = np.nan
+        self.last_diverged = gone
+        self.n_sim += B
+        self.n_diverged += int(gone.sum())
         return out
 
     def sse(self, theta) -> np.ndarray:
@@ -161,15 +195,21 @@ class OutputErrorProblem:
             parts = [((p - s["Y"][:, :, None]) / self.scale[None, :, None]).reshape(-1, p.shape[2])
                      for s, p in zip(self.segments, preds)]
         r = np.concatenate(parts, axis=0)
+        r[:, self.last_diverged] = math.sqrt(DIVERGED)  # one penalty for the whole diverged candidate
         return np.where(np.isfinite(r), r, math.sqrt(DIVERGED))
 
     def summary(self, theta) -> dict:
-        """RMSE per output channel and the normalised cost at ``theta`` (for the results table)."""
+        """RMSE per output channel and the normalised cost at ``theta`` (for the results table; inf when its
+        replay diverges, with ``diverged`` 1), and how many candidates simulated so far diverged."""
+        counts = {"simulations": self.n_sim, "diverged_candidates": self.n_diverged,
+                  "polish_skipped": self.polish_skipped}
         S = self.sse(np.asarray(theta, float).reshape(self.k, 1))[:, 0]
         out = {f"rmse_{c}": float(math.sqrt(S[i] / self.n_obs[i])) for i, c in enumerate(self.outputs)}
         out["cost"] = float(np.sum(S / self.scale ** 2) / self.n_total)
         out["segments"] = len(self.segments)
         out["samples"] = self.n_total
+        out["diverged"] = float(self.last_diverged[0])
+        out.update(counts)
         return out
 
 
@@ -251,7 +291,9 @@ def local_fit(problem: OutputErrorProblem, x0, max_nfev: int = 200):
     the Jacobian by forward differences of all k parameters in ONE batch simulation.
 
     Returns ``scipy.optimize.OptimizeResult`` with ``x``, ``fun`` (the cost), ``success``, ``nfev`` and
-    ``cov`` (Gauss-Newton covariance of x for unit residual variance; None if singular).
+    ``cov`` (Gauss-Newton covariance of x for unit residual variance; None if singular) and ``skipped``: when a
+    replay the Jacobian needs diverges (or the start itself does), the fit stops and returns the best point it
+    evaluated (``success`` False, ``skipped`` True, the reason in ``message``) instead of failing the run.
     """
     from scipy.optimize import OptimizeResult, least_squares
 
@@ -262,17 +304,36 @@ def local_fit(problem: OutputErrorProblem, x0, max_nfev: int = 200):
     x0 = np.clip(x0, lo + 1e-6 * span, hi - 1e-6 * span)
     steps = 1e-6 * np.maximum(np.abs(x0), 1e-3 * span)
 
+    best = {"x": x0, "cost": problem.cost(x0), "nfev": 1}
+
     def fun(x):
-        return problem.residuals(x[:, None])[:, 0]
+        r = problem.residuals(x[:, None])[:, 0]
+        best["nfev"] += 1
+        if not problem.last_diverged[0]:
+            c = float(np.sum(r * r)) / problem.n_total
+            if c < best["cost"]:
+                best.update(x=x.copy(), cost=c)
+        return r
 
     def jac(x, f0=None):
         X = np.repeat(x[:, None], problem.k + 1, axis=1)
         h = np.where(x + steps <= hi, steps, -steps)  # stay inside the box
         X[np.arange(problem.k), np.arange(1, problem.k + 1)] += h
         R = problem.residuals(X)
-        return (R[:, 1:] - R[:, :1]) / h
+        J = (R[:, 1:] - R[:, :1]) / h
+        if problem.last_diverged.any() or not np.all(np.isfinite(J)):
+            raise _NoJacobian("a replay of the Jacobian diverged")
+        return J
 
-    res = least_squares(fun, x0, jac=jac, bounds=(lo, hi), x_scale="jac", max_nfev=max_nfev, method="trf")
+    try:
+        if best["cost"] >= DIVERGED:
+            raise _NoJacobian("the start diverges")
+        res = least_squares(fun, x0, jac=jac, bounds=(lo, hi), x_scale="jac", max_nfev=max_nfev, method="trf")
+    except _NoJacobian as e:  # divergence is a result: keep the best point, report the skip
+        problem.polish_skipped += 1
+        x = np.asarray(best["x"], float)
+        return OptimizeResult(x=x, fun=float(problem.cost(x)), success=False, nfev=best["nfev"], cov=None,
+                              message=f"Gauss-Newton polish skipped: {e}", skipped=True)
     cov = None
     try:
         JTJ = res.jac.T @ res.jac
@@ -280,4 +341,8 @@ def local_fit(problem: OutputErrorProblem, x0, max_nfev: int = 200):
     except np.linalg.LinAlgError:
         pass
     return OptimizeResult(x=res.x, fun=float(problem.cost(res.x)), success=bool(res.success), nfev=res.nfev,
-                          message=res.message, cov=cov)
+                          message=res.message, cov=cov, skipped=False)
+
+
+class _NoJacobian(Exception):
+    """The Gauss-Newton step cannot be formed (a replay diverged): the local fit stops."""

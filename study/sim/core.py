@@ -504,12 +504,11 @@ def _run_loop_asm(run, n_kind_params: int) -> str:
     """Assembly of the compiled time loop, for the signature ``integrate`` uses.
 
     To check that the member loop vectorised: packed instructions on zmm/ymm registers (``vfmadd...pd``,
-    ``vdivpd``, ``vsqrtpd``) in the loop body. numba does not keep the assembly of cached code, so this
-    compiles the loop afresh (a few seconds) unless it was compiled in this process.
+    ``vdivpd``, ``vsqrtpd``) in the loop body. Always compiled afresh (a few seconds), with numba's on-disk cache
+    off, for that one signature: numba keeps no assembly of code it loaded from its cache, and which overloads a
+    process compiled itself depends on what ran before and on the cache's state, so the answer must not come
+    from them (issue 12: the README's two commands run in order were reported to fail here).
     """
-    for cres in run.overloads.values():
-        if not getattr(cres.library, "_disable_inspection", False):
-            return run.inspect_asm(cres.signature.args)
     run = njit(cache=False, _nrt=False, pipeline_class=_NoAliasCompiler, **JIT_FLAGS)(run.py_func)
     B = 1
     f = lambda *shape: np.zeros(shape)  # noqa: E731

@@ -227,7 +227,7 @@ class EmceeSampler(Estimator):
 
     # ---------------------------------------------------------------------------------- output error
     def fit_output_error(self, problem, progress: bool = False):
-        from ..output_error import local_fit
+        from ..output_error import DIVERGED, local_fit
 
         k, nc = problem.k, len(problem.outputs)
         self._init_outputs(k)
@@ -235,7 +235,8 @@ class EmceeSampler(Estimator):
         start = problem.x0 if problem.x0 is not None else 0.5 * (lo + hi)
         if self.init not in ("auto", "de", "local"):
             raise ValueError(f"emcee: init must be 'auto', 'de' or 'local', got {self.init!r}")
-        if self.init == "de" or (self.init == "auto" and k <= 10):
+        # DE over the box first for few parameters, or when the start diverges (no local fit can start there)
+        if self.init == "de" or (self.init == "auto" and k <= 10) or problem.cost(start) >= DIVERGED:
             from scipy.optimize import differential_evolution
 
             de = differential_evolution(problem.cost, problem.bounds, popsize=15, maxiter=200, tol=1e-6,

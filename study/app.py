@@ -21,7 +21,7 @@ import hydra
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
-from .cli import EXIT_FAILED, EXIT_USAGE, fail, reported, run_hydra, status
+from .cli import EXIT_FAILED, EXIT_USAGE, fail, report, reported, run_hydra, status
 
 log = logging.getLogger("study")
 CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
@@ -68,6 +68,15 @@ class CollectResults(Callback):
                   f"{moved.get('duplicate', 0)} duplicate(s) moved to records/superseded/", file=sys.stderr, flush=True)
 
     def on_run_start(self, config: DictConfig, **kwargs) -> None:
+        from .cli import UsageError
+        from .settings import check_run
+
+        try:  # a setting that makes no sense is refused before the results folder is even created
+            # (a sweep's jobs are checked by the sweeper); the hydra node cannot be resolved in a callback
+            check_run({k: OmegaConf.to_container(config[k], resolve=True) if OmegaConf.is_config(config[k])
+                       else config[k] for k in config if k != "hydra"})
+        except UsageError as e:
+            sys.exit(report(e, "study"))  # one line (the traceback with --verbose), exit status 2
         self._check(config)
 
     def on_multirun_start(self, config: DictConfig, **kwargs) -> None:

@@ -729,8 +729,17 @@ class ResultStore:
         ``records/`` (tried with a real file: permission bits say nothing about ACLs, read-only mounts, a full
         disk or a file where the folder should be). The app calls it before the first job."""
         try:
-            self.records_dir.mkdir(parents=True, exist_ok=True)
-            for d in (self.root, self.records_dir):
+            # nothing is created before the first job: a folder not there yet is probed at its nearest existing
+            # ancestor (a refused setting must leave no results folder behind)
+            dirs = [d for d in (self.root, self.records_dir) if d.is_dir()]
+            if not dirs:
+                anc = self.root.resolve()
+                while not anc.exists() and anc != anc.parent:
+                    anc = anc.parent
+                if not anc.is_dir():
+                    raise NotADirectoryError(20, "not a folder", str(anc))
+                dirs = [anc]
+            for d in dirs:
                 probe = _tmp_path(d, "write-probe")
                 os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
                 os.unlink(probe)

@@ -92,6 +92,12 @@ def check_simulation(conf: dict) -> None:
             number(conf, f"noise.level.{ch}", minimum=0)
     else:
         number(conf, "noise.level", minimum=0)
+    for block in ("full_scale", "model_scale"):  # absolute noise: a standard deviation per sensor, in its units
+        sensors = noise.get(block)
+        if sensors is not None and not isinstance(sensors, dict):
+            raise ConfigError(f"noise.{block}={sensors!r}: expected a mapping sensor -> standard deviation")
+        for name in sensors or {}:
+            number(conf, f"noise.{block}.{name}", minimum=0)
     number(conf, "noise.sample_dt", above=0)
     number(conf, "noise.sample_dt_LU", above=0)
     number(conf, "depth.h_T", above=0)

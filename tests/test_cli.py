@@ -46,7 +46,8 @@ def _compose(name, overrides=()):
 @pytest.mark.parametrize("override, named", [
     ("sim.dt=0", "sim.dt=0"), ("sim.dt=-0.1", "sim.dt=-0.1"), ("sim.dt=inf", "sim.dt=inf"),
     ("sim.duration_scale=0", "sim.duration_scale=0"), ("sim.duration_scale=nan", "sim.duration_scale=nan"),
-    ("noise.level=-0.01", "noise.level=-0.01"), ("noise.sample_dt=0", "noise.sample_dt=0"),
+    ("noise=low_relative noise.level=-0.01", "noise.level=-0.01"), ("noise.sample_dt=0", "noise.sample_dt=0"),
+    ("noise.full_scale.position_m=-1", "noise.full_scale.position_m=-1"),
     ("depth.h_T=-2", "depth.h_T=-2"), ("seed=-1", "seed=-1"),
     ("+estimator_overrides.emcees.target_ess=10", "no estimator 'emcees'"),
     ("+estimator_overrides.emcee.target_es=10", "no hyper-parameter target_es"),
@@ -54,7 +55,8 @@ def _compose(name, overrides=()):
     ("'environment.effects=[{name: rudder_dynamics, lag: -1}]'", "environment.effects[0].lag=-1"),
 ])
 def test_a_setting_that_makes_no_sense_is_refused_naming_it(override, named):
-    conf = _compose("config", [override.strip("'")])
+    conf = _compose("config", override.strip("'").split(" ") if " " in override and "[" not in override
+                    else [override.strip("'")])
     with pytest.raises(cli.ConfigError, match=named.replace("[", r"\[").replace(".", r"\.")):
         check_run(conf)
 
@@ -144,7 +146,7 @@ def test_two_writers_of_one_record_cannot_replace_each_other(tmp_path):
     real_exists = Path.exists
 
     def writer(name):
-        rec = Record(data=df.assign(u=df["u"] + (0.0 if name == "a" else 1.0)), meta={"name": name})
+        rec = Record(data=df.assign(u=df["u"] * (1.0 if name == "a" else 1.001)), meta={"name": name})  # plausible
         barrier.wait()
         try:
             write_record(rec, path)
@@ -165,8 +167,8 @@ def test_two_writers_of_one_record_cannot_replace_each_other(tmp_path):
     winner = next(n for n, r in results.items() if r == "wrote")
     got = read_record(path)
     assert got.meta["name"] == winner
-    pd.testing.assert_series_equal(got.data["u"], df["u"] + (0.0 if winner == "a" else 1.0), check_names=False,
-                                   atol=1e-9)
+    pd.testing.assert_series_equal(got.data["u"], df["u"] * (1.0 if winner == "a" else 1.001), check_names=False,
+                                   atol=1e-9, rtol=1e-12)
     assert [f.name for f in tmp_path.iterdir()] == ["rec.csv"]  # no temporary file left behind
 
 

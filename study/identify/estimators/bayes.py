@@ -9,27 +9,34 @@ Likelihoods (``likelihood``; the output-error one whenever the structure simulat
   sandwich posterior (Mueller 2013) of the whitened rows: generalised least squares with a block cluster-robust
   covariance (``study.identify.row_noise``, which gives the reasons and sources). Gaussian, O(k^2) per walker.
   Without the structure's operators (rows given as bare ``X, y``, the RTS smoother, r from the heading) the rows
-  are not whitened: least squares with the same block-robust covariance (the MAP estimator's model). Measured
-  (``tests/test_regression_calibration.py``; KT Mariner, first-order nonlinear Nomoto, 10/10 zigzag, 1 % noise on
-  every channel, 60 datasets per structure): the 90 % intervals cover K, T and alpha 85-93 % of the time on
-  central, integral and smoothed rows; on euler and diff_center rows they cover the structure's noise-free limit
-  (88-95 %) but the truth only 52-68 % of the time: euler's O(h) truncation error, about 1.5 posterior sd at the
-  0.1 s sampling, is no sampling noise. With the rows whitened, diff_center gives the euler posterior (the
-  differencing is undone), and the errors in the regressors no longer bias the estimate (least squares on euler
-  rows: 180-270 sd).
+  are not whitened: least squares with the same block-robust covariance (the MAP estimator's model; on iid
+  rows with smooth regressors it covers 85 %). Measured over 60 datasets per structure, 1 % noise on every
+  channel, the rudder included (``benchmarks/bench_regression_calibration.py``; the slow test in
+  ``tests/test_regression_calibration.py``): the 90 % intervals cover the truth on central, integral and
+  smoothed rows 94-97 % of the time on the KT Mariner (first-order nonlinear Nomoto, K, T, alpha; 10/10 zigzag at
+  0.1 s; posterior sd 1.19 times the actual spread) and 84-85 % on KVLCC2's MMG hull (17 coefficients; 0.86-0.88
+  times). Not sampling noise, and not covered: euler's O(h) truncation (1.55 posterior sd on the KT at 0.1 s:
+  56 % of the truth, 95 % of the structure's noise-free limit; at 0.02 s 89 %); diff_center as seed 000 splits
+  and cleans it (11-44 %: the random hold-out leaves gaps in its chains of differences, so the differencing
+  cannot be undone, and the noise of its differenced regressors swamps them). Without the split and cleaning
+  the whitening undoes the differencing and centring: euler's posterior. The errors in the regressors leave
+  the intervals 1.2 times too wide on the KT at 0.1 s (1.06 at 0.02 s) and bias a few MMG coefficients by up
+  to about half a posterior sd (the worst covered 75-78 %); with the rows whitened they no longer bias the
+  estimate by hundreds of sd (least squares on euler rows).
 - **regression_iid**: y = X theta + e, e ~ N(0, sigma^2) independent per row, sigma inferred. Computed from the
   sufficient statistics in the centred form SS(theta) = SS_min + (theta - theta_LS)^T X^T X (theta - theta_LS).
-  Right for white residuals only: on differenced noisy records its intervals are 16-85 times the actual spread
-  of the least-squares estimates (central-difference noise, whose lag-2 autocorrelation -0.5 cancels in the
-  estimate, counted as independent), yet miss the truth on euler rows (errors in the regressors). Kept so that
-  the study can show the difference.
+  Right for white residuals only: on noisy records its posterior sd is 8-150 times the actual spread of the
+  least-squares estimates (central-difference noise, whose lag-2 autocorrelation -0.5 cancels in the estimate,
+  counted as independent: every interval covers), yet on KVLCC2's euler rows it covers 23 % (least squares off
+  by 127 times the truth, median: the state at k in the regressors and in the target). Kept so that the study can
+  show the difference.
 - **output error** (``output_error`` structure): each output channel c has its own noise scale sigma_c;
   log L = sum_c [-n_c log sigma_c - SSE_c(theta) / (2 sigma_c^2)], SSE from simulating the model through the
   records (all walkers in one batch simulation). Correct when the measurement noise is white and the model
   structure is right.
 
-Both regression likelihoods are Gaussian in the coefficients up to the noise scale; each is sampled like any
-other so that the draws feed the predictive bands and the chain diagnostics.
+Both regression posteriors are Gaussian in the coefficients (the iid one given its noise scale); each is sampled
+like any other so that the draws feed the predictive bands and the chain diagnostics.
 
 Priors (stated): regression coefficients independent normal N(0, (prior_scale sd(y) / rms(X_j))^2), i.e. one
 term may explain up to ~``prior_scale`` times the spread of the target; output-error parameters uniform in the

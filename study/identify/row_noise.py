@@ -3,10 +3,10 @@ the posterior of the coefficients under it (emcee's default regression likelihoo
 
 Why: a structure turns white measurement noise into correlated row noise. Central differences of white noise are
 correlated at lag 2 with coefficient -0.5; forward differences at lag 1; Savitzky-Golay derivatives over the
-window. Counted as independent rows, the derivative noise (variance ~ sigma^2 / h^2 per row) looks some 30-80
-times larger than what reaches the estimate, where the differences telescope (measured on the KT Mariner:
-intervals 16-85 times the actual spread of the estimates). And a regressor's noise that also enters the target
-(euler: the state at k in both) biases least squares by hundreds of its standard deviations.
+window. Counted as independent rows, the derivative noise (variance ~ sigma^2 / h^2 per row) looks far larger
+than what reaches the estimate, where the differences telescope (measured on the KT Mariner at 0.1 s, 1 % noise:
+posterior sd 17-154 times the actual spread of the estimates). And a regressor's noise that also enters the
+target (euler: the state at k in both) biases least squares by hundreds of its standard deviations.
 
 The model: a row's noise is ``e = D_p w_0 + ... + D_1 w_(p-1) + V w_p`` with ``D_q`` the structure's q-th
 derivative operator, ``V`` its value operator (``Structure.noise_operators``, restricted to the training rows by
@@ -28,14 +28,19 @@ the block cluster-robust sandwich of those rows (``study.identify.estimators.pri
 estimator's: Mueller 2013's sandwich posterior), so what the noise model misses (a regressor's gain changing along
 the record, coloured noise, slow model error) still counts: weighted least squares with robust inference
 (Romano & Wolf 2017, J. Econometrics 197, 1-19). Whitened rows are nearly independent, so the blocks no longer
-break a cancellation as they do on central-difference rows (where the same sandwich overstated the spread 3-4
-times). The result is Gaussian: emcee's per-walker cost is O(k^2).
+break a cancellation as they do on central-difference rows (where the same sandwich overstated the spread 3-5
+times on the KT Mariner). The result is Gaussian: emcee's per-walker cost is O(k^2).
 
 Assumptions (labelled): white measurement noise on each channel; a constant noise mix ``Q`` along the records
 (each regressor's gain to its noise treated as constant; the sandwich absorbs the rest); rows linear in the noise
-to first order (small noise). Not modelled, because it is no sampling noise: a structure's truncation error
-(euler's O(h)), which a noise-free record has too; the posterior then covers the structure's noise-free limit,
-not the truth (``tests/test_regression_calibration.py`` measures both).
+to first order (small noise); the regressors' noise enters ``e`` but is not modelled as noise in the regressors
+(errors in variables): measured, it leaves the KT Mariner's intervals 1.2 times too wide at 0.1 s (1.06 at
+0.02 s) and biases a few MMG coefficients by about half a posterior sd, and where gaps in the rows keep the
+whitening from undoing a differencing (diff_center's random split) it biases the estimate beyond any interval.
+Not modelled, because it is no sampling noise: a structure's truncation error (euler's O(h)), which a
+noise-free record has too; the posterior then covers the structure's noise-free limit, not the truth
+(``study.identify.calibration`` measures both). Numerical limit: the covariance of twice-differenced rows
+(diff_center) is ill-conditioned like n^4; at 41,700 rows it is no longer positive definite in doubles.
 """
 from __future__ import annotations
 

@@ -162,6 +162,9 @@ class RowNoise:
                                 options={"xatol": 1e-3, "fatol": 1e-3, "maxiter": 400 * k,
                                          "initial_simplex": p0 + 0.5 * np.vstack([np.zeros(k), np.eye(k)])})
         p = res.x if res.fun <= min(vals) else p0
+        if not np.isfinite(min(res.fun, min(vals))):
+            raise ValueError("row noise: no noise mix gives a positive definite row covariance (or the rows fit "
+                             "exactly)")
         self.params_ = p
         self.Q = self.q_of(p)
         self._chol = self.cholesky(self.Q)

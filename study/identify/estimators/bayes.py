@@ -213,10 +213,15 @@ class EmceeSampler(Estimator):
             raise ValueError(f"emcee: the regressors are rank-deficient (rank {rank} of {k}); the posterior is "
                              "improper along the null space")
         sd0 = self._default_prior_sd(X, y) if prior_sd is None else np.asarray(prior_sd, float)
+        failed = 0.0
         if noise_operators is not None:
-            return gls_posterior(X, y, noise_operators, np.zeros(k), sd0, q_raw=q_raw)
+            try:
+                return gls_posterior(X, y, noise_operators, np.zeros(k), sd0, q_raw=q_raw)
+            except (ValueError, linalg.LinAlgError):  # no usable noise mix: the rows as they are (recorded)
+                failed = 1.0
         mean, cov, diag = gaussian_posterior(X, y, np.zeros(k), sd0, widen=False)
-        return mean, cov, {"whitened": 0.0, "sigma": diag["sigma"], "data_blocks": diag["data_blocks"]}, None
+        return mean, cov, {"whitened": 0.0, "whitening_failed": failed, "sigma": diag["sigma"],
+                           "data_blocks": diag["data_blocks"]}, None
 
     def fit(self, X, y, progress: bool = False, prior: dict | None = None, noise_operators=None):
         """Sample the posterior of ``y = X theta + e``. ``noise_operators``: the structure's, a

@@ -67,7 +67,7 @@ def test_the_noise_model_is_exact_when_its_assumptions_hold():
     for _ in range(80):
         w, u = rng.standard_normal(n + 2), rng.standard_normal(n + 2)
         y = X @ theta + D @ w - 0.3 * (V @ w) + 0.2 * (V @ u)
-        m, c, diag, noise = gls_posterior(X, y, ops, np.zeros(3), np.full(3, np.inf))
+        m, c, _, noise = gls_posterior(X, y, ops, np.zeros(3), np.full(3, np.inf))
         s = np.sqrt(np.diag(c))
         hit.append(np.abs(m - theta) <= 1.645 * s)
         err.append(m - theta)

@@ -129,7 +129,7 @@ def dataset_intervals(case: Case, structure, seed: int, likelihood: str = "regre
         Xc, yc = clean[eq].X.to_numpy(), clean[eq].y
         sd0 = est._default_prior_sd(X, y)
         if ops:
-            mean, cov, diag, noise = est.gaussian_regression(X, y, pr.noise_operators)
+            mean, cov, _, noise = est.gaussian_regression(X, y, pr.noise_operators)
             q = None if noise is None else noise.q_raw
             lim = est.gaussian_regression(Xc, yc, clean[eq].noise_operators, q_raw=q, prior_sd=sd0)[0]
         else:

@@ -139,7 +139,7 @@ class RowNoise:
             return np.inf
         return 0.5 * self.n * np.log(rss / self.n) + float(np.sum(np.log(c[0])))
 
-    def fit(self, X: np.ndarray, y: np.ndarray) -> "RowNoise":
+    def fit(self, X: np.ndarray, y: np.ndarray) -> RowNoise:
         """``Q`` by maximum likelihood with the coefficients profiled out. Start: off-diagonal 0 and the other
         noises a common fraction of the first, the best of a coarse grid; then Nelder-Mead."""
         X, y = np.asarray(X, float), np.asarray(y, float)
@@ -177,7 +177,7 @@ class RowNoise:
         """``Q`` in the units of the operators as given (not scaled)."""
         return self.Q / np.outer(self.scale, self.scale)
 
-    def use(self, q_raw: np.ndarray) -> "RowNoise":
+    def use(self, q_raw: np.ndarray) -> RowNoise:
         """Take a noise mix fitted elsewhere (``q_raw`` of another :class:`RowNoise`) instead of fitting one: the
         same likelihood on other rows, e.g. the noise-free records' (the structure's noise-free limit)."""
         self.Q = np.asarray(q_raw, float) * np.outer(self.scale, self.scale)

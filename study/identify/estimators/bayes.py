@@ -188,6 +188,14 @@ class EmceeSampler(Estimator):
     # ------------------------------------------------------------------------------------ regression
     LIKELIHOODS = ("regression", "regression_iid")
 
+    def skip(self, model, structure) -> tuple[bool, str]:
+        """The iid regression likelihood asked of a structure that simulates is a sweep's cross product, not a
+        run: output error has its own likelihood, so the run would repeat the default one under another id."""
+        if structure.simulates and self.likelihood == "regression_iid":
+            return True, (f"likelihood 'regression_iid' is a regression likelihood; structure '{structure.name}' "
+                          "simulates the model (its likelihood is the output error's, run with the default)")
+        return super().skip(model, structure)
+
     @property
     def uses_noise_operators(self) -> bool:
         """Whether :meth:`fit` wants the structure's noise operators (``study.identify.fit`` passes them)."""

@@ -202,7 +202,7 @@ def test_diagnose_checks_its_thresholds_and_train():
 
 
 def test_two_doctors_cannot_write_into_one_folder(tmp_path):
-    from study.diagnose import claimed
+    from study.doctor.run import claimed
 
     with claimed(tmp_path / "rep", overwrite=False):
         with pytest.raises(cli.OutputExistsError, match="another python -m study.diagnose"):

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from ..figures.plots import (
+from ..plots import (
     Builder, _first, emcee_figures,
 )
 

@@ -60,7 +60,8 @@ def test_de_beats_central_differences_on_psi_only(kt1):
 
 
 def _coverage_regression(n_rep=60, k=5, n=400, level=0.9):
-    """Regression likelihood with its assumptions exact: y = X theta + N(0, sigma^2), X fixed."""
+    """The iid regression likelihood with its assumptions exact: y = X theta + N(0, sigma^2), X fixed (the default
+    likelihood, which models the rows' noise as the structure makes it, is tested in test_regression_calibration)."""
     rng = np.random.default_rng(7)
     t = np.linspace(0, 60, n)
     X = np.column_stack([np.sin(0.3 * t), np.cos(0.17 * t), np.sin(0.3 * t) ** 3, t / 60, np.sin(0.31 * t + 0.2)])
@@ -68,7 +69,7 @@ def _coverage_regression(n_rep=60, k=5, n=400, level=0.9):
     hits = np.zeros((n_rep, k), dtype=bool)
     # 400 effective samples and 20 autocorrelation times: enough for 5 % and 95 % quantiles to +-1 %
     est = make_estimator("emcee", target_ess=400, check_every=200, min_steps=400, max_steps=4000, interval=level,
-                         min_tau_multiple=20)
+                         min_tau_multiple=20, likelihood="regression_iid")
     for i in range(n_rep):
         y = X @ theta + 0.2 * rng.standard_normal(n)
         est.set_params(seed=i).fit(X, y)
@@ -93,7 +94,7 @@ def test_emcee_records_its_diagnostics_and_chain():
     rng = np.random.default_rng(0)
     X = rng.standard_normal((300, 3))
     y = X @ np.array([1.0, 2.0, -1.0]) + 0.1 * rng.standard_normal(300)
-    est = make_estimator("emcee", target_ess=300).fit(X, y)
+    est = make_estimator("emcee", target_ess=300, likelihood="regression_iid").fit(X, y)
     d = est.diagnostics_
     assert 0.2 < d["acceptance"] < 0.8 and d["ess"] >= 300 and d["converged"] == 1.0
     assert d["steps"] > 50 * d["tau_max"]

@@ -66,6 +66,25 @@ def regression_rows(model, structure, records, candidates: int | None = None):
     return {eq: tuple(np.concatenate([p[j] for p in parts]) for j in range(3)) for eq, parts in acc.items()}
 
 
+def noise_operators(model, structure, records) -> list | None:
+    """The structure's noise operators (:meth:`Structure.noise_operators`) of every segment of every record, in
+    the order of :func:`regression_rows`, block-diagonal over segments: sparse (built rows x all nodes). None when
+    the structure has none (its rows are no fixed linear stencil of the samples)."""
+    import scipy.sparse as sp
+
+    blocks = []
+    for i, rec in enumerate(records):
+        df = rec.data if hasattr(rec, "data") else rec
+        for seg in segments(df, i, min_len=structure.min_nodes(model.order)):
+            ops = structure.noise_operators(structure.measured(seg), model.order)
+            if ops is None:
+                return None
+            blocks.append(ops)
+    if not blocks:
+        return None
+    return [sp.block_diag([b[j] for b in blocks], format="csr") for j in range(len(blocks[0]))]
+
+
 def _drop_duplicate_candidates(Phi: np.ndarray, n_model: int, names: list) -> tuple[np.ndarray, list]:
     """Drop candidate columns (after the first ``n_model``) that the columns kept so far explain to
     ``R^2 > 1 - CANDIDATE_R2_GAP`` by least squares: such a term cannot be told from the model's own terms
@@ -88,11 +107,13 @@ def _csv_bytes(df: pd.DataFrame) -> bytes:
     return df.to_csv(index=False, float_format="%.10g").encode("utf-8")
 
 
-def _fit_kwargs(fn, progress: bool, prior: dict | None = None) -> dict:
+def _fit_kwargs(fn, progress: bool, prior: dict | None = None, noise_operators=None) -> dict:
     params = inspect.signature(fn).parameters
     out = {"progress": progress} if "progress" in params else {}
     if prior is not None and "prior" in params:
         out["prior"] = prior
+    if noise_operators is not None and "noise_operators" in params:
+        out["noise_operators"] = noise_operators
     return out
 
 
@@ -109,6 +130,7 @@ class Prepared:
     report: dict
     n_model: int
     collinearity: dict
+    noise_operators: object = None  # the training rows' row_noise.RowOperators (prepare(..., operators=True))
 
 
 def term_scales(model, records) -> dict:
@@ -136,9 +158,15 @@ def term_scales(model, records) -> dict:
     return out
 
 
-def prepare(model, structure, records, candidates: int | None = None, seed: int = 0) -> dict:
-    """Per equation the :class:`Prepared` regression of ``model`` on ``records`` with ``structure``."""
+def prepare(model, structure, records, candidates: int | None = None, seed: int = 0,
+            operators: bool = False) -> dict:
+    """Per equation the :class:`Prepared` regression of ``model`` on ``records`` with ``structure``; with
+    ``operators`` also the training rows' noise operators (:func:`noise_operators` through the post-processing's
+    row map, as a :class:`study.identify.row_noise.RowOperators`; None when the structure has none)."""
+    from .row_noise import RowOperators
+
     rows = regression_rows(model, structure, records, candidates=candidates)
+    ops = noise_operators(model, structure, records) if operators else None
     out = {}
     for eq, (Phi, y, seg) in rows.items():
         names = list(model.equations[eq])
@@ -150,7 +178,9 @@ def prepare(model, structure, records, candidates: int | None = None, seed: int 
             raise ValueError(f"equation {eq}: {len(post['y'])} rows after structure '{structure.name}' for "
                              f"{len(names)} unknowns")
         out[eq] = Prepared(pd.DataFrame(post["Phi"], columns=names), post["y"], post["Phi_test"], post["y_test"],
-                           post["report"], n_model, collinearity(post["Phi"][:, :n_model]))
+                           post["report"], n_model, collinearity(post["Phi"][:, :n_model]),
+                           None if ops is None else RowOperators([(post["rows"] @ L).tocsr() for L in ops],
+                                                                 centred=bool(structure.center)))
     return out
 
 
@@ -191,8 +221,10 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
         if prior is not None:
             metrics["prior_source"] = str(prior_cfg["source"])
             metrics["prior_is_truth"] = float(prior_cfg["source"] == "vessel" and bool(model.truth()[2]))
+        # an estimator whose likelihood models the rows' noise (emcee) gets the structure's noise operators
+        wants_ops = bool(getattr(make_estimator(estimator_cfg), "uses_noise_operators", False)) and prior is None
         t0 = time.perf_counter()
-        prepared = prepare(model, structure, records, candidates=cand, seed=seed)
+        prepared = prepare(model, structure, records, candidates=cand, seed=seed, operators=wants_ops)
         timings["regressors"] = time.perf_counter() - t0
         coefs, fit_time = {}, 0.0
         collin = {}
@@ -214,7 +246,7 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
             eq_prior = {n: prior[n] for n in names if n in prior} if prior is not None else None
             if eq_prior is not None and len(eq_prior) < len(names):
                 raise ValueError(f"equation {eq}: the prior has no value for {[n for n in names if n not in eq_prior]}")
-            est.fit(X, post["y"], **_fit_kwargs(est.fit, progress, eq_prior))
+            est.fit(X, post["y"], **_fit_kwargs(est.fit, progress, eq_prior, pr.noise_operators))
             fit_time += time.perf_counter() - t0
             coef = np.asarray(est.coef_, float).ravel()
             resid = post["y"] - X.to_numpy() @ coef - getattr(est, "intercept_", 0.0)

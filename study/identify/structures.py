@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
+import scipy.sparse as sp
 
 #: a time step above this many times the median starts a new segment (a dropout)
 GAP_FACTOR = 1.5
@@ -393,17 +394,72 @@ class Structure:
                 out[c] = savgol_interior(a, w, p)
         return out
 
+    def noise_operators(self, seg: Segment, order: int) -> list | None:
+        """How white noise on the segment's samples reaches its rows: ``[D_order, ..., D_1, V]``, sparse (rows x
+        nodes) matrices, ``D_p`` the structure's p-th derivative operator and ``V`` its value operator (after the
+        smoothing of :meth:`nodes`). A row's noise is ``D_order w_a + ... + V w_b`` for node-wise noises
+        ``w`` (the target's derivative of the measured signal, the regressors' values); the regression likelihood
+        of ``estimator=emcee`` models its covariance with them (``study.identify.row_noise``).
+
+        Read off the structure's own operators by applying them to comb signals (1 on every C-th node, C wider
+        than any stencil: the grouping of Curtis, Powell & Reid 1974 for sparse Jacobians), so each structure
+        gives its own stencils and a change to an operator changes its noise model with it; checked on a random
+        signal. None where the rows are no fixed linear stencil of the samples: the RTS smoother's states, and
+        ``rate_from_heading`` (r is itself a difference of psi, and the other channels are not).
+        """
+        if self.rate_from_heading or (self.kind == "smoothed" and self.method == "rts"):
+            return None
+        n = len(seg.t)
+        ops = self.ops(seg, order)
+        half = self.window_samples(seg.t) // 2 if self.kind == "smoothed" else 0
+        w = order + 1 + half  # no stencil reaches further from its row's node
+        C = 2 * w + 1
+        E = np.zeros((n, C))
+        E[np.arange(n), np.arange(n) % C] = 1.0
+
+        def value(F):
+            if self.kind != "smoothed":
+                return ops.value(F)
+            nd = self.nodes(Segment(seg.t, {j: F[:, j] for j in range(F.shape[1])}, seg.record))
+            return ops.value(np.column_stack([nd[j] for j in range(F.shape[1])]))
+
+        maps = [lambda F, p=p: ops.d(F, p) for p in range(order, 0, -1)] + [value]
+        m = len(ops)
+        off = np.arange(-w, w + 1)
+        cols = ops.rows[:, None] + off[None, :]
+        rows = np.repeat(np.arange(m)[:, None], len(off), axis=1)
+        ok = (cols >= 0) & (cols < n)
+        probe = np.random.default_rng(0).standard_normal((n, 1))
+        out = []
+        for f in maps:
+            R = np.asarray(f(E)).reshape(m, C)
+            M = sp.csr_matrix((R[rows[ok], cols[ok] % C], (rows[ok], cols[ok])), shape=(m, n))
+            M.eliminate_zeros()
+            ref = np.asarray(f(probe)).reshape(m)
+            if not np.allclose(M @ probe[:, 0], ref, rtol=1e-8, atol=1e-8 * (np.max(np.abs(ref)) + 1.0)):
+                raise RuntimeError(f"structure '{self.name}': its operators are not a stencil within {w} nodes of "
+                                   "each row (noise_operators)")
+            out.append(M)
+        return out
+
     # -- rows after the model built them (per equation)
     def postprocess(self, Phi: np.ndarray, y: np.ndarray, seg_id: np.ndarray, seed: int = 0):
         """Differencing, cleaning, split and centring (each as configured). Returns a dict of arrays:
-        ``Phi, y`` (training rows), ``Phi_test, y_test`` (held-out rows, maybe empty), ``report`` (counts)."""
+        ``Phi, y`` (training rows), ``Phi_test, y_test`` (held-out rows, maybe empty), ``report`` (counts), and
+        ``rows``: the sparse (training rows x built rows) map of the differencing, cleaning, split and selection
+        (training rows before centring = ``rows @ built rows``), which carries the built rows' noise model over."""
         report = {"rows_built": int(len(y))}
+        rows = sp.identity(len(y), format="csr")
         if self.difference:
             rho = float(self.difference.get("rho", 1.0))
             same = seg_id[1:] == seg_id[:-1]  # consecutive rows of one segment only
             Phi = (Phi[1:] - rho * Phi[:-1])[same]
             y = (y[1:] - rho * y[:-1])[same]
             seg_id = seg_id[1:][same]
+            i = np.nonzero(same)[0]
+            j = np.arange(len(i))
+            rows = sp.csr_matrix((np.r_[np.ones(len(i)), np.full(len(i), -rho)], (np.r_[j, j], np.r_[i + 1, i])),
+                                 shape=(len(i), len(same) + 1))
         keep = np.ones(len(y), dtype=bool)
         c = self.clean or {}
         if c.get("missing", True):
@@ -429,7 +485,7 @@ class Structure:
             small = np.abs(y) < float(c["min_abs"]) * np.std(y[keep])
             report["rows_small"] = int((small & keep).sum())
             keep &= ~small
-        Phi, y = Phi[keep], y[keep]
+        Phi, y, rows = Phi[keep], y[keep], rows[np.nonzero(keep)[0]]
         s = self.split or {}
         frac = float(s.get("train_fraction", 1.0))
         test = np.zeros(len(y), dtype=bool)
@@ -441,10 +497,11 @@ class Structure:
                 rng = np.random.default_rng(int(s.get("seed", seed)))
                 test[rng.choice(len(y), n_test, replace=False)] = True
         Pt, yt, Pv, yv = Phi[~test], y[~test], Phi[test], y[test]
+        rows = rows[np.nonzero(~test)[0]]
         n_sel = (self.select or {}).get("n_rows")
         if n_sel and int(n_sel) < len(yt):  # seed 003 Sec. 3.3: 100 equally spaced pairs of the 600
             idx = np.unique(np.round(np.linspace(0, len(yt) - 1, int(n_sel))).astype(int))
-            Pt, yt = Pt[idx], yt[idx]
+            Pt, yt, rows = Pt[idx], yt[idx], rows[idx]
             report["rows_selected"] = int(len(idx))
         if self.center:
             mx, my = Pt.mean(axis=0), yt.mean()
@@ -452,7 +509,7 @@ class Structure:
             Pv, yv = Pv - mx, yv - my
         report["rows_train"] = int(len(yt))
         report["rows_test"] = int(len(yv))
-        return {"Phi": Pt, "y": yt, "Phi_test": Pv, "y_test": yv, "report": report}
+        return {"Phi": Pt, "y": yt, "Phi_test": Pv, "y_test": yv, "report": report, "rows": rows}
 
 
 STRUCTURE_KINDS = ("euler", "central", "integral", "smoothed", "output_error")

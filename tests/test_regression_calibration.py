@@ -1,0 +1,146 @@
+"""emcee's regression likelihood models the noise each sample structure makes (``study.identify.row_noise``), so that
+its 90 % intervals cover the truth about 90 % of the time (``study.calibration``).
+
+The coverage statistics use the posterior in closed form (it is Gaussian: the same function ``EmceeSampler.fit``
+samples), and one test checks that the sampler reproduces those intervals through ``identify``. The case is the
+study's own: the KT Mariner identified as a first-order nonlinear Nomoto model (exact truth) from a 10/10 zigzag
+with 1 % white noise on every channel, the rudder included, rows built by the pipeline's structures.
+"""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from study import calibration as cal
+from study.identify.fit import identify, prepare
+from study.identify.estimators.prior import gls_posterior
+from study.identify.row_noise import RowNoise, RowOperators
+from study.identify.structures import make_structure
+from study.config import read_config
+
+STRUCTURES = ("euler", "central", "integral", "smoothed", "diff_center")
+
+
+@pytest.fixture(scope="module")
+def kt():
+    return cal.make_case("kt1_mariner", "nomoto1_nl", ["zigzag_10_10"])
+
+
+@pytest.mark.parametrize("name", STRUCTURES)
+def test_noise_operators_carry_a_sample_perturbation_to_the_rows(kt, name):
+    """The operators are the structure's: a small perturbation of r and of the rudder on the samples changes the
+    training rows by exactly D r' (the target) and V delta' (the rudder column), through the differencing,
+    cleaning and random split of diff_center (its centring removes the mean)."""
+    st = make_structure(name)
+    rec = cal.records(kt, 3)
+    rng = np.random.default_rng(0)
+    d_r, d_d = 1e-9 * rng.standard_normal(len(rec[0])), 1e-9 * rng.standard_normal(len(rec[0]))
+    pert = [rec[0].assign(r=rec[0]["r"] + d_r, delta=rec[0]["delta"] + d_d)]
+    (a,) = prepare(kt.model, st, rec, seed=3, operators=True).values()
+    (b,) = prepare(kt.model, st, pert, seed=3, operators=True).values()
+    D, V = a.noise_operators.operators
+    dy, dX = b.y - a.y, b.X["delta"].to_numpy() - a.X["delta"].to_numpy()
+    want_y, want_x = D @ d_r, V @ d_d
+    if st.center:
+        want_y, want_x = want_y - want_y.mean(), want_x - want_x.mean()
+    assert a.noise_operators.centred == st.center
+    np.testing.assert_allclose(dy, want_y, rtol=1e-5, atol=1e-6 * np.abs(want_y).max())
+    np.testing.assert_allclose(dX, want_x, rtol=1e-5, atol=1e-6 * np.abs(want_x).max())
+
+
+def test_the_noise_model_is_exact_when_its_assumptions_hold():
+    """Rows with central-difference noise plus a white part correlated with it, e = (D - 0.3 V) w + 0.2 V u, and
+    exact smooth regressors. The fitted noise model whitens the rows (no autocorrelation left), so the GLS
+    covariance s^2 (X_w' X_w)^-1 has the width of the actual spread; the posterior (the block sandwich of the
+    whitened rows) covers the truth 80-97 % of the time (measured 0.82-0.85: the sandwich's known shortfall with
+    30 blocks and smooth regressors, Cameron & Miller 2015, J. Human Resources 50, 317-372); independent rows
+    state a spread tens of times too wide."""
+    import statsmodels.api as sm
+
+    n, h = 2000, 0.1
+    t = h * np.arange(n + 2)
+    D = sp.diags([-np.ones(n), np.ones(n)], [0, 2], shape=(n, n + 2)) / (2 * h)
+    V = sp.eye(n, n + 2, 1)
+    X = np.column_stack([np.sin(0.05 * t[1:-1]), np.cos(0.031 * t[1:-1]) ** 3, 0.01 * t[1:-1]])
+    theta = np.array([1.0, -2.0, 0.5])
+    ops = RowOperators([D.tocsr(), V.tocsr()])
+    rng = np.random.default_rng(1)
+    hit, err, sd, sd_gls, acf = [], [], [], [], []
+    for _ in range(80):
+        w, u = rng.standard_normal(n + 2), rng.standard_normal(n + 2)
+        y = X @ theta + D @ w - 0.3 * (V @ w) + 0.2 * (V @ u)
+        m, c, _, noise = gls_posterior(X, y, ops, np.zeros(3), np.full(3, np.inf))
+        s = np.sqrt(np.diag(c))
+        hit.append(np.abs(m - theta) <= 1.645 * s)
+        err.append(m - theta)
+        sd.append(s)
+        f = sm.OLS(noise.whiten(y), noise.whiten(X)).fit()
+        sd_gls.append(f.bse)
+        r = f.resid - f.resid.mean()
+        acf.append([r[k:] @ r[:-k] / (r @ r) for k in (1, 2, 3)])
+    spread = np.std(err, axis=0)
+    assert np.all(np.abs(np.mean(acf, axis=0)) < 0.03), np.mean(acf, axis=0)
+    ratio = np.median(sd_gls, axis=0) / spread
+    assert np.all((ratio > 0.8) & (ratio < 1.25)), ratio
+    assert 0.80 <= np.mean(hit) <= 0.97, np.mean(hit)
+    # independent rows: least squares with sigma^2 (X'X)^-1 states a spread far larger than the actual one
+    iid = [np.sqrt(np.diag(cal._iid_posterior(X, X @ theta + D @ rng.standard_normal(n + 2),
+                                              np.full(3, 1e9))[1])) for _ in range(20)]
+    assert np.all(np.median(iid, axis=0) > 10 * np.median(sd, axis=0))
+
+
+def test_row_noise_rejects_operators_of_another_size():
+    with pytest.raises(ValueError, match="rows"):
+        RowNoise([sp.eye(5, 7).tocsr(), sp.eye(4, 7).tocsr()])
+
+
+def test_regression_intervals_have_the_width_of_the_spread_fast(kt):
+    """A coarse version of the slow test below (12 datasets): on central, integral and smoothed rows the intervals
+    cover the truth and their width matches the actual spread of the estimates (the iid likelihood's intervals
+    are 40 times too wide there); on euler rows they cover the structure's noise-free limit."""
+    for name in ("central", "integral", "smoothed", "euler"):
+        s = cal.summary(cal.coverage(kt, name, n=12)).iloc[0]
+        assert 0.6 <= s["sd_ratio"] <= 1.6, s.to_dict()
+        assert s["cover_limit"] >= 0.75, s.to_dict()
+        if name != "euler":
+            assert s["cover_truth"] >= 0.75, s.to_dict()
+    s = cal.summary(cal.coverage(kt, "central", n=12, likelihood="regression_iid")).iloc[0]
+    assert s["sd_ratio"] > 10 and s["cover_truth"] == 1.0, s.to_dict()
+
+
+def test_emcee_samples_the_closed_form_posterior(kt):
+    """Through ``identify`` (the structure's operators passed by ``study.identify.fit``), emcee's 90 % intervals
+    of K, T, alpha are the closed-form posterior's, to its Monte Carlo error (0.11 posterior sd at 400 effective
+    samples; allowed 0.35)."""
+    cfg = dict(read_config("estimator", "emcee"))
+    cfg["params"] = dict(cfg["params"], target_ess=400, min_tau_multiple=20)
+    st = make_structure("central")
+    for seed in (1, 2):
+        ident = identify(kt.model, st, cfg, cal.records(kt, seed), seed=seed)
+        assert ident.metrics["est_N_whitened"] == 1.0 and ident.metrics["est_N_converged"] == 1.0
+        ref = {r["name"]: r for r in cal.dataset_intervals(kt, st, seed, draws=40000)}
+        for p in ident.params:
+            r = ref[p["name"]]
+            sd = (r["ci_high"] - r["ci_low"]) / 3.29
+            assert abs(p["ci_low"] - r["ci_low"]) < 0.35 * sd and abs(p["ci_high"] - r["ci_high"]) < 0.35 * sd, (
+                p, r)
+
+
+@pytest.mark.slow
+def test_regression_intervals_are_calibrated_per_structure(kt):
+    """The statistical test: 60 noisy datasets per regression structure; 90 % intervals must cover the truth 80-97 %
+    of the time (all parameters; none below 75 %). 7 minutes on this shared 2-core machine.
+
+    central, integral, smoothed at the simulation's 0.1 s. euler's O(h) truncation is about 1.5 posterior sd at
+    0.1 s, no sampling noise: there the intervals cover the structure's noise-free limit, and the truth at 0.02 s.
+    diff_center's differencing and centring alone give euler's posterior at 0.1 s (the whitening undoes them);
+    as seed 000 cleans and splits it (a random 20 % of the differenced rows held out, rows with |z| > 3 dropped)
+    it is not covered: the gaps leave the differencing impossible to undo, and the errors in its regressors bias
+    it (README; ``benchmarks/bench_regression_calibration.py`` measures it)."""
+    nosplit = {**read_config("structure", "diff_center"), "name": "diff_center_nosplit", "split": {}, "clean": {}}
+    fine = cal.make_case("kt1_mariner", "nomoto1_nl", ["zigzag_10_10"], sim={"dt": 0.02}, name="kt 0.02 s")
+    checks = [(kt, "central", "truth"), (kt, "integral", "truth"), (kt, "smoothed", "truth"),
+              (kt, "euler", "limit"), (kt, nosplit, "limit"), (fine, "euler", "truth")]
+    for case, st, what in checks:
+        s = cal.summary(cal.coverage(case, st, n=60)).iloc[0]
+        assert s["datasets"] == 60
+        assert 0.80 <= s[f"cover_{what}"] <= 0.97 and s[f"worst_{what}"] >= 0.75, s.to_dict()

@@ -28,7 +28,8 @@ sys.path.insert(0, str(ROOT))
 from study.doctor.diagnose import Doctor  # noqa: E402
 from study.measure import MeasurementModel  # noqa: E402
 from study.pipeline import resolve_effects  # noqa: E402
-from study.sim import load_vessel, read_config, simulate  # noqa: E402
+from study.config import read_config  # noqa: E402
+from study.sim import load_vessel, simulate  # noqa: E402
 
 TARGET_S = 120.0
 MANEUVERS = ("zigzag_10_10", "zigzag_20_20", "random_rudder", "zigzag_20_10", "turning_35")

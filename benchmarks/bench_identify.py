@@ -43,7 +43,8 @@ from study.identify.fit import identify, prepare  # noqa: E402
 from study.identify.models import make_model  # noqa: E402
 from study.identify.structures import make_structure  # noqa: E402
 from study.measure import MeasurementModel  # noqa: E402
-from study.sim import load_vessel, read_config, simulate  # noqa: E402
+from study.config import read_config  # noqa: E402
+from study.sim import load_vessel, simulate  # noqa: E402
 
 TARGETS_S = {"ls": 0.05, "ridge": 0.05, "lssvm": 0.05, "tlssvm": 0.05, "svr_eps": 10.0, "svr_nu": 10.0,
              "sindy": 2.0, "de_kt": 30.0, "emcee_regression": 60.0, "emcee_output_error": 600.0}

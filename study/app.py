@@ -21,10 +21,11 @@ import hydra
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
+from . import config
 from .cli import EXIT_FAILED, EXIT_USAGE, fail, report, reported, run_hydra, status
 
 log = logging.getLogger("study")
-CONF_DIR = str(Path(__file__).resolve().parents[1] / "conf")
+CONF_DIR = str(config.CONF_DIR)  # Hydra's config_path
 
 
 def _register_covering_sweeper() -> None:

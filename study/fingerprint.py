@@ -8,19 +8,21 @@ The components of a run, and the modules each starts from (:func:`entries`):
 ``simulator``  ``study.sim`` (the compiled integrator and the effects), the vessel kind's module (``vessel.kind``),
                ``study.measure``, ``study.maneuvers``, and the YAML of every manoeuvre the run simulates
                (``conf/maneuver/<name>.yaml``: read at run time by its name, so not part of the configuration)
-``model``      ``study.identify.models``, ``study.identify.regression``; with ``model.effects``: the doctor's
-               ``study.doctor.fit``, every module of ``study.doctor.effects`` and ``conf/effect/<name>.yaml``
+``model``      ``study.identify.models``, ``study.identify.regression``; with ``model.effects``: identification
+               with effects, ``study.identify.with_effects``, every module of ``study.identify.effects`` and
+               ``conf/effect/<name>.yaml``
 ``structure``  ``study.identify.structures``
 ``estimator``  the module of ``estimator._target_`` and ``study.identify.estimators`` (the factory); a module
                outside the repository (a user's own class) is hashed under its module name
 ``pipeline``   ``study.pipeline`` (a simulated run); a run on files (``train`` given): also ``study.records_run``,
-               ``study.schema``, ``study.loaders``, ``study.diagnose`` and the doctor's ``checks``, ``fit`` and
-               ``maneuver_metrics``; a doctor ladder step (``study: doctor``): ``study.diagnose`` and the doctor
+               ``study.schema``, ``study.loaders``, ``study.vessel_checks``, ``study.maneuver_metrics`` and
+               identification with effects (its replay); a doctor ladder step (``study: doctor``):
+               ``study.diagnose``, the doctor and identification with effects
 =============  ======================================================================================================
 
 A component is its entry modules **plus every module of the ``study`` package they import**, found statically
 (the import lines of its source, those inside functions too), transitively: ``study.identify.fit`` is in the
-``model`` and ``pipeline`` components because they import it. An import *into* one of the
+``pipeline`` component because ``study.pipeline`` imports it. An import *into* one of the
 :data:`OPTIONAL_PACKAGES` from a module outside it is not followed: those packages run only when the
 configuration says so (``model.effects``, ``train``, ...), and they are then entries. So editing the SVR
 estimator changes the fingerprint of SVR runs only, editing ``study/sim/mmg.py`` that of runs on MMG vessels,
@@ -45,9 +47,11 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "study"
 
 #: Packages that run only when a run's configuration asks for them: imports into them from outside are not
-#: followed (``study.pipeline`` imports ``study.doctor.fit`` inside a function, for ``model.effects`` only).
-OPTIONAL_PACKAGES = ("study.doctor", "study.records_run", "study.diagnose", "study.figures", "study.studies",
-                     "study.reality_check", "study.results", "study.app", "study.simulate", "study.fingerprint")
+#: followed (``study.pipeline`` imports ``study.identify.with_effects`` inside a function, for ``model.effects``
+#: only).
+OPTIONAL_PACKAGES = ("study.doctor", "study.identify.with_effects", "study.identify.effects", "study.records_run",
+                     "study.diagnose", "study.figures", "study.reality_check", "study.results", "study.app",
+                     "study.simulate", "study.fingerprint")
 
 COMPONENTS = ("simulator", "model", "structure", "estimator", "pipeline")
 #: Hex digits kept of each file's hash in a record (48 bits: a collision between two versions of one file is
@@ -55,8 +59,8 @@ COMPONENTS = ("simulator", "model", "structure", "estimator", "pipeline")
 FILE_DIGITS = 12
 DIGITS = 16
 
-_FILE_RUN_MODULES = ("study.records_run", "study.schema", "study.loaders", "study.diagnose", "study.doctor.checks",
-                     "study.doctor.fit", "study.doctor.maneuver_metrics")
+_FILE_RUN_MODULES = ("study.records_run", "study.schema", "study.loaders", "study.vessel_checks",
+                     "study.maneuver_metrics", "study.identify.with_effects", "study.identify.effects")
 
 
 # ------------------------------------------------------------------------------------------------ modules
@@ -221,9 +225,9 @@ def entries(config: dict) -> dict:
     mod_files = []
     effects = _names(model.get("effects"))
     if effects:
-        mod += ["study.doctor.fit", "study.doctor.effects"]
-        eff_dir = REPO_ROOT / "study" / "doctor" / "effects"
-        mod += [f"study.doctor.effects.{p.stem}" for p in sorted(eff_dir.glob("*.py")) if p.stem != "__init__"]
+        mod += ["study.identify.with_effects", "study.identify.effects"]
+        eff_dir = REPO_ROOT / "study" / "identify" / "effects"
+        mod += [f"study.identify.effects.{p.stem}" for p in sorted(eff_dir.glob("*.py")) if p.stem != "__init__"]
         mod_files += [(_key(p), p) for n in effects if (p := _data_file("effect", n)) is not None]
 
     est_mods, est_files = ["study.identify.estimators"], []
@@ -239,7 +243,8 @@ def entries(config: dict) -> dict:
     if on_files:
         pipe += list(_FILE_RUN_MODULES)
     if doctor:
-        pipe += ["study.diagnose", "study.doctor.diagnose", "study.doctor.fit", "study.doctor.effects"]
+        pipe += ["study.diagnose", "study.doctor.run", "study.doctor.diagnose", "study.identify.with_effects",
+                 "study.identify.effects"]
     return {"simulator": (tuple(sim), tuple(sim_files)), "model": (tuple(mod), tuple(mod_files)),
             "structure": (("study.identify.structures",), ()), "estimator": (tuple(est_mods), tuple(est_files)),
             "pipeline": (tuple(pipe), ())}

@@ -16,9 +16,13 @@ where it looked when nothing is there.
   Hochbaum 2006; redistributed by Alexandersson et al. 2022, Ocean Eng 266, 112940). Degrees, earth-fixed
   velocities and delta > 0 to PORT in the files: converted here. The CPMC reference point is not stated in
   the report excerpt we have; positions and velocities are taken as given (assumed midship, labelled in meta).
+
+:func:`load_records` reads the records a pattern names (a file, folder, glob or comma-separated list of them), schema
+files and the real datasets' own formats alike (the doctor's reading; a run on files reads them one by one).
 """
 from __future__ import annotations
 
+import glob as globmod
 import os
 from pathlib import Path
 
@@ -192,3 +196,58 @@ def load_real(path) -> Record:
     if path.suffix.lower() == ".csv" and "esso" in str(path).lower():
         return load_esso_osaka(path)
     raise SchemaError(f"{path}: not a known real-data file (HSVA KVLCC2 .dat or Esso Osaka .csv)")
+
+
+# ------------------------------------------------------------------------ record files named by patterns
+def patterns(spec) -> list:
+    """A ``train``/``validate`` value as a list of patterns: a list as it is, a string split at commas."""
+    if spec is None:
+        return []
+    items = list(spec) if isinstance(spec, (list, tuple)) else [p for p in str(spec).split(",")]
+    return [str(p).strip() for p in items if str(p).strip()]
+
+
+def is_real(path: Path) -> bool:
+    """A file in one of the real datasets' own formats (HSVA ``.dat``, an Esso Osaka CSV), not a schema file."""
+    if path.suffix.lower() == ".dat":
+        return True
+    if path.suffix.lower() == ".csv":
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            head = fh.readline()
+        return "u_velo [m/s]" in head  # an Esso Osaka file
+    return False
+
+
+def load_records(spec, states: str = "measured", state_options: dict | None = None) -> list:
+    """Records from a file, folder or glob, or a comma-separated list of them: schema files, or the real
+    datasets' own formats. ``states`` (``measured | auto | ekf``) and ``state_options``: where u, v, r come from
+    (``study.schema.read_record``; the real datasets' loaders always give u, v, r, which ``ekf`` refines)."""
+    from .schema import STATES, SUPPORTED, read_record, with_estimated_states
+
+    if states not in STATES:
+        raise ValueError(f"states={states}: expected one of {list(STATES)}")
+
+    files = []
+    for pattern in patterns(spec):  # a comma-separated list, as ``python -m study train=...`` takes
+        p = Path(pattern).expanduser()
+        if p.is_file():
+            found = [p]
+        elif p.is_dir():
+            found = sorted(f for f in p.iterdir() if f.suffix.lower() in SUPPORTED + (".dat",))
+        else:
+            found = sorted(Path(f) for f in globmod.glob(pattern) if Path(f).suffix.lower() in SUPPORTED + (".dat",))
+        if not found:
+            raise FileNotFoundError(f"{pattern}: no record files (.csv, .parquet, .dat) found")
+        files += [f for f in found if f not in files]
+    out = []
+    for f in files:
+        if is_real(f):
+            rec = load_real(f)
+            if states == "ekf":
+                rec = with_estimated_states(rec, state_options)
+        else:
+            rec = read_record(f, states=states, state_options=state_options)
+        rec.meta.setdefault("name", f.stem)
+        out.append(rec)
+    return out
+

@@ -12,7 +12,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .sim.core import CTRL_OPEN, CTRL_TURN, CTRL_ZIGZAG
+from .config import read_config
+
+# Controller codes of the compiled integrator's programme (``study.sim.core`` runs it): 0 open loop (command
+# series), 1 zigzag programme, 2 turning circle with pull-out. Defined here, where programmes are written.
+CTRL_OPEN, CTRL_ZIGZAG, CTRL_TURN = 0, 1, 2
 
 SIDES = {"starboard": 1.0, "port": -1.0}
 
@@ -82,8 +86,6 @@ def get_maneuver(spec) -> Maneuver:
     if isinstance(spec, Maneuver):
         return spec
     if isinstance(spec, str):
-        from .sim import read_config
-
         spec = read_config("maneuver", spec)
     spec = dict(spec)
     if "hold_L" in spec:

@@ -15,8 +15,9 @@ import pandas as pd
 from . import maneuvers as man_mod
 from .measure import NOISE_KINDS, MeasurementModel, sensor_sd
 from .metrics import prediction_metrics, standard_metrics
+from .run_common import estimator_config, known_vessel, shallow_water, skip_reason, trace_bytes
 from .sim import default_dt, load_vessel, simulate
-from .sim.effects import NotApplicable, ShallowWater
+from .sim.effects import NotApplicable
 
 
 def resolve_effects(effects: list, U0: float) -> list[dict]:
@@ -30,16 +31,6 @@ def resolve_effects(effects: list, U0: float) -> list[dict]:
     return out
 
 
-def _shallow(conf: dict) -> ShallowWater:
-    depth = conf.get("depth") or {}
-    return ShallowWater(h_T=depth.get("h_T"), formula=depth.get("formula", "kijima_1990"))
-
-
-def known_vessel(conf: dict):
-    """The vessel as the engineer knows it: the vessel config at the configured depth (no current or wind)."""
-    return load_vessel(conf["vessel"], [_shallow(conf)])
-
-
 def vessels_for(conf: dict):
     """(truth vessel with depth + environment, model vessel with depth only).
 
@@ -48,7 +39,7 @@ def vessels_for(conf: dict):
     """
     U0 = float(conf["vessel"]["operation"]["U0"])
     env_effects = resolve_effects((conf.get("environment") or {}).get("effects", []), U0)
-    truth = load_vessel(conf["vessel"], [_shallow(conf), *env_effects])
+    truth = load_vessel(conf["vessel"], [shallow_water(conf), *env_effects])
     return truth, known_vessel(conf)
 
 
@@ -133,38 +124,6 @@ def simulate_set(vessel, names, conf, seed_base):
         T = man.duration_for(vessel) * float(sim.get("duration_scale", 1.0))
         out[name] = simulate(vessel, man, dt=dt, duration=T, seed=seed_base + i)
     return out
-
-
-def estimator_config(conf: dict) -> dict:
-    """The run's estimator config with the study's ``estimator_overrides[<name>]`` merged into its params (a
-    sweep over estimators can shorten, say, emcee's chains without touching the others)."""
-    cfg = dict(conf["estimator"])
-    over = (conf.get("estimator_overrides") or {}).get(cfg.get("name")) or {}
-    if over:
-        cfg["params"] = {**(cfg.get("params") or {}), **over}
-    return cfg
-
-
-def _skip_reason(model, structure, estimator) -> str | None:
-    """Why this model x structure x estimator cannot run (None when it can)."""
-    for who in (model, estimator):
-        skip, why = who.skip(structure) if who is model else who.skip(model, structure)
-        if skip:
-            return why
-    return None
-
-
-def _trace_bytes(meas, pred, channels, max_rows: int = 600, label: str = "truth") -> bytes:
-    """Truth (or, with ``label='measured'``, a measured record) and prediction of one validation manoeuvre,
-    thinned to at most ``max_rows`` rows, as CSV."""
-    step = max(1, int(np.ceil(len(meas) / max_rows)))
-    m = meas.iloc[::step].reset_index(drop=True)
-    out = {"time": m["time"]}
-    for c in ("u", "v", "r", "x0", "y0", "psi", "delta"):
-        out[f"{label}_{c}"] = m[c]
-        if c in pred:
-            out[f"model_{c}"] = np.interp(m["time"], pred["time"], pred[c])
-    return pd.DataFrame(out).to_csv(index=False, float_format="%.7g").encode("utf-8")
 
 
 def _predictive_band(model, draws: dict, maneuver: str, meas, conf, seed, max_rows: int = 600):
@@ -258,7 +217,7 @@ def run_study(conf: dict, data=None) -> dict:
     structure = make_structure(conf["structure"])
     est_cfg = estimator_config(conf)
     estimator = make_estimator(est_cfg)
-    why = _skip_reason(model, structure, estimator)
+    why = skip_reason(model, structure, estimator)
     if why:
         return {"status": "skipped", "error": why, "metrics": {}, "params": [], "timings": {}}
 
@@ -278,8 +237,8 @@ def run_study(conf: dict, data=None) -> dict:
     sampling = {"sample_dt": sample_dt, "sample_dt_LU": sample_dt / T_ship if T_ship else float("nan")}
 
     if (conf["model"].get("effects") or []):
-        # a model with effects (model.effects=[current, ...]): identified by the doctor's variable projection
-        from .doctor.fit import identify_in_study
+        # a model with effects (model.effects=[current, ...]): identified with them by variable projection
+        from .identify.with_effects import identify_in_study
 
         if model.type != "kind" or structure.simulates:
             return {"status": "skipped", "error": "model.effects need a force model (type: kind) and a regression "
@@ -331,7 +290,7 @@ def run_study(conf: dict, data=None) -> dict:
             except ValueError:
                 pass  # a metric the record cannot carry (e.g. too short) is simply absent
         if keep_traces:
-            artefacts[f"validation/{name}.csv"] = _trace_bytes(meas, pred, chans)
+            artefacts[f"validation/{name}.csv"] = trace_bytes(meas, pred, chans)
         if ident.draws and keep_traces:
             band = _predictive_band(model, ident.draws, name, meas, conf, seed)
             if band is not None:

@@ -3,11 +3,11 @@ model=<m> structure=<s> estimator=<e>``.
 
 Nothing is simulated. The training records are read from files (``study.schema.read_records``; HSVA's KVLCC2
 ``.dat`` files and the Esso Osaka CSVs through ``study.loaders`` as the doctor reads them), checked against the
-vessel (``study.doctor.checks``: rudder sign, speed against the vessel's scale, n in rps), the model is
+vessel (``study.vessel_checks``: rudder sign, speed against the vessel's scale, n in rps), the model is
 identified on them with any structure and estimator exactly as in a simulated run (the vessel config gives the
 known parts: mass, propeller, rudder, and the configured water depth ``depth``), and each validation record
 gets an open-loop replay of the identified model with its measured rudder and propeller from its initial
-state (the doctor's replay, ``study.doctor.fit.DoctorProblem.predict``).
+state (the doctor's replay, ``study.identify.with_effects.EffectsProblem.predict``).
 
 What lands in the results table, and why:
 
@@ -30,7 +30,7 @@ What lands in the results table, and why:
   ``val_<name>_rmse_<c>``, ``val_<name>_nrmse_<c>`` (RMSE over the **standard deviation of the measured
   channel** over that span; NaN when it is 0), ``_max_abs_error_<c>``, ``_cc_<c>``, ``_track_rmse``,
   ``_final_position_error``, for the model's channels (u, v, r, psi; r, psi for Nomoto); the manoeuvre metrics
-  of ``study.doctor.maneuver_metrics`` (the replay-aware use of ``study.metrics``: turning circle: tactical
+  of ``study.maneuver_metrics`` (the replay-aware use of ``study.metrics``: turning circle: tactical
   diameter, advance, transfer, steady turning rate; zigzag: overshoots from the measured switch heading,
   period, initial turning time, time to check yaw) as ``val_<name>_measured_<metric>`` and
   ``val_<name>_model_<metric>``; summaries ``val_records``, ``val_diverged_records``, ``val_nrmse_mean`` (mean
@@ -105,14 +105,6 @@ class FileData:
 
 
 # ------------------------------------------------------------------------------------------------ reading
-def patterns(spec) -> list:
-    """A ``train``/``validate`` value as a list of patterns: a list as it is, a string split at commas."""
-    if spec is None:
-        return []
-    items = list(spec) if isinstance(spec, (list, tuple)) else [p for p in str(spec).split(",")]
-    return [str(p).strip() for p in items if str(p).strip()]
-
-
 def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
@@ -157,12 +149,11 @@ def _read_kwargs(conf: dict) -> dict:
 
 def _read(path: Path, read_kw: dict):
     """One record file, with any failure turned into a one-line message naming the file."""
-    from .diagnose import _is_real
-    from .loaders import load_real
+    from .loaders import is_real, load_real
     from .schema import read_records
 
     try:
-        rec = load_real(path) if _is_real(path) else read_records(path, **read_kw)[0]
+        rec = load_real(path) if is_real(path) else read_records(path, **read_kw)[0]
     except UnicodeDecodeError as e:
         raise RecordsInputError(f"{path}: not a text CSV file (undecodable byte at position {e.start}); expected "
                                 "a CSV or Parquet record (docs/schema.md)") from e
@@ -193,7 +184,7 @@ def metric_key(name: str) -> str:
 
 def _vessel_check(conf: dict, sets: list) -> tuple[str, list]:
     """(mode, problems) of the doctor's record checks against the vessel; raises under ``checks=error``."""
-    from .doctor.checks import check_records
+    from .vessel_checks import check_records
 
     mode = str(conf.get("checks") or "error")
     if mode not in CHECK_MODES:
@@ -217,6 +208,8 @@ def load(conf: dict) -> FileData:
 
     Raises :class:`RecordsInputError` (one line) on any problem with the files, before anything is run.
     """
+    from .loaders import patterns
+
     t0 = time.perf_counter()
     read_kw = _read_kwargs(conf)
     sets = []
@@ -280,10 +273,10 @@ def run_config(conf: dict, data: FileData) -> dict:
 
 def check_study_name(conf: dict) -> None:
     """A run on files must not join a simulated study: its figures assume a truth and the simulated axes."""
-    from .studies import discover
+    from .config import simulated_studies
 
     name = conf.get("study")
-    if name in discover():
+    if name in simulated_studies():
         raise RecordsInputError(f"study={name}: a simulated study (python -m study.figures builds its figures from "
                                 "runs with a truth); expected your own name (study=<name>) or none for a run on files")
 
@@ -294,7 +287,7 @@ def _skipped(why: str) -> dict:
 
 
 def _depth_notes(base, conf: dict, data: FileData) -> list:
-    from .doctor.fit import record_h_T
+    from .identify.with_effects import record_h_T
 
     want = (conf.get("depth") or {}).get("h_T")
     draft = float(base.cfg["particulars"]["d"])
@@ -314,22 +307,22 @@ def _depth_notes(base, conf: dict, data: FileData) -> list:
 def _replayer(model, base, estimates: dict, records: list, names: list):
     """``replay(record, name) -> DataFrame or None``: the identified model through a record by the doctor's
     replay (measured rudder and propeller, the record's initial state; None when it diverged)."""
-    from .doctor.fit import DoctorProblem, Fit
+    from .identify.with_effects import EffectsProblem, Fit
 
     if model.type == "kind":
         vcfg, coefs, omit = base.cfg, dict(estimates), model.cfg.get("omit") or []
     else:  # a Nomoto model: its own vessel config carries K, T, alpha
         vcfg, coefs, omit = model.model_vessel(estimates).cfg, {}, []
-    pb = DoctorProblem(vcfg, {"name": model.name, "type": "kind", "equations": {}, "omit": omit},
+    pb = EffectsProblem(vcfg, {"name": model.name, "type": "kind", "equations": {}, "omit": omit},
                        [r.data for r in records], effects={}, names=names)
     fit = Fit((), {}, coefs, math.nan)
     return lambda rec, name: pb.predict(fit, rec.data, pb.info_for(rec.data, rec.meta, name))
 
 
 def _validate(replay, data: FileData, channels, L: float, keep_traces: bool, metrics: dict, artefacts: dict):
-    from .doctor.maneuver_metrics import maneuver_metrics
+    from .maneuver_metrics import maneuver_metrics
     from .metrics import prediction_metrics
-    from .pipeline import _trace_bytes
+    from .run_common import trace_bytes
 
     errs, diverged = [], 0
     for name, rec in zip(data.validate.names, data.validate.records):
@@ -352,7 +345,7 @@ def _validate(replay, data: FileData, channels, L: float, keep_traces: bool, met
                 metrics[f"val_{key}_measured_{row['metric']}"] = float(row["measured"])
                 metrics[f"val_{key}_model_{row['metric']}"] = float(row["baseline"])
         if keep_traces:
-            artefacts[f"validation/{key}.csv"] = _trace_bytes(rec.data, pred, channels, label="measured")
+            artefacts[f"validation/{key}.csv"] = trace_bytes(rec.data, pred, channels, label="measured")
     metrics["val_records"] = float(len(data.validate.records))
     metrics["val_diverged_records"] = float(diverged)
     metrics["val_nrmse_mean"] = float(np.mean(errs)) if errs else math.nan
@@ -365,7 +358,7 @@ def run_on_records(conf: dict, data: FileData) -> dict:
     from .identify.fit import identify
     from .identify.models import make_model
     from .identify.structures import make_structure
-    from .pipeline import _skip_reason, estimator_config, known_vessel
+    from .run_common import estimator_config, known_vessel, skip_reason
     from .sim.effects import NotApplicable
 
     timings = {"read": data.seconds}
@@ -377,7 +370,7 @@ def run_on_records(conf: dict, data: FileData) -> dict:
     model = make_model(conf["model"], base)
     structure = make_structure(conf["structure"])
     est_cfg = estimator_config(conf)
-    why = _skip_reason(model, structure, make_estimator(est_cfg))
+    why = skip_reason(model, structure, make_estimator(est_cfg))
     effects = tuple(conf["model"].get("effects") or [])
     if why:
         return _skipped(why)
@@ -396,10 +389,10 @@ def run_on_records(conf: dict, data: FileData) -> dict:
         metrics["validate_files"] = json.dumps([str(p) for p in data.validate.paths])
     artefacts = {}
     if effects:  # the doctor's identification (variable projection with the effects), as in a simulated run
-        from .doctor.fit import DoctorProblem
+        from .identify.with_effects import EffectsProblem
 
         t0 = time.perf_counter()
-        pb = DoctorProblem(base.cfg, conf["model"], train, conf["structure"], names=data.train.names)
+        pb = EffectsProblem(base.cfg, conf["model"], train, conf["structure"], names=data.train.names)
         fit = pb.fit(effects, refine=True)
         timings["fit"] = time.perf_counter() - t0
         free = pb.free_coefficients(effects)  # coefficient -> equation (the model's and those effects free)

@@ -185,7 +185,7 @@ def read_record(path, min_samples: int = 20, states: str = "measured", state_opt
     - ``"measured"`` (default): the record must have them (a missing one is an error naming the file and the
       column, and mentioning this option);
     - ``"auto"``: a record without (some of) ``u, v, r`` but with positions ``x0, y0`` and heading ``psi`` gets
-      them estimated by the extended Kalman filter and RTS smoother of ``study.identify.state_estimation``
+      them estimated by the extended Kalman filter and RTS smoother of ``study.state_estimation``
       (those it has are used as measurements and refined); a record that has all three is read as measured;
     - ``"ekf"``: always estimated (measured ``u, v, r`` refined).
 
@@ -281,7 +281,7 @@ def _estimate_states(df: pd.DataFrame, meta: dict, path, min_samples: int, lacki
     stand_in = df.assign(**{c: 0.0 for c in lacking})
     # the stand-ins cannot agree with the track: the plausibility checks wait for the estimated u, v, r
     validate(stand_in, path, min_samples=min_samples, plausibility="off" if lacking else plausibility)
-    from .identify.state_estimation import apply_to_frame
+    from .state_estimation import apply_to_frame
 
     src = df.copy()
     for c in ("time",) + ESTIMATOR_INPUTS + tuple(c for c in ESTIMABLE if c in df.columns):

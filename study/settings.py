@@ -121,8 +121,8 @@ def check_simulation(conf: dict) -> None:
 
 def _estimator_params(name: str, cfg: dict | None = None) -> list[str]:
     """The hyper-parameters the estimator ``name`` (or its config ``cfg``) accepts: its class's constructor."""
+    from .config import read_config
     from .identify.estimators import estimator_class, list_estimators
-    from .sim import read_config
 
     if cfg is None:
         if name not in list_estimators():

@@ -12,7 +12,7 @@ import hydra
 import numpy as np
 from omegaconf import DictConfig, OmegaConf
 
-from .app import CONF_DIR
+from .config import CONF_DIR
 from .cli import reported, run_hydra
 
 
@@ -60,7 +60,7 @@ def make_record(conf: dict):
     return Record(data=df.reset_index(drop=True), meta=meta)
 
 
-@hydra.main(config_path=CONF_DIR, config_name="simulate", version_base="1.3")
+@hydra.main(config_path=str(CONF_DIR), config_name="simulate", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     with reported("study.simulate"):  # a problem: one line on stderr and the exit status (study.cli)
         _write(OmegaConf.to_container(cfg, resolve=True))

@@ -18,7 +18,8 @@ import math
 from study.measure import MeasurementModel
 from study.pipeline import resolve_effects
 from study.schema import Record
-from study.sim import load_vessel, read_config, simulate
+from study.config import read_config
+from study.sim import load_vessel, simulate
 from study.sim.effects import ShallowWater
 
 VESSEL = read_config("vessel", "kvlcc2_l7")

@@ -202,7 +202,7 @@ def test_diagnose_checks_its_thresholds_and_train():
 
 
 def test_two_doctors_cannot_write_into_one_folder(tmp_path):
-    from study.diagnose import claimed
+    from study.doctor.run import claimed
 
     with claimed(tmp_path / "rep", overwrite=False):
         with pytest.raises(cli.OutputExistsError, match="another python -m study.diagnose"):
@@ -248,7 +248,9 @@ def _run_in_process(main, capsys, argv=()):
 
 
 def test_user_errors_exit_2_and_unexpected_ones_exit_1_with_a_hint(capsys, monkeypatch):
-    monkeypatch.delenv("STUDY_VERBOSE", raising=False)
+    # setenv, not delenv: monkeypatch then removes the STUDY_VERBOSE=1 that --verbose sets below in this process
+    # (a delenv of an absent variable restores nothing, and every later command in the session was verbose)
+    monkeypatch.setenv("STUDY_VERBOSE", "")
 
     def bad_file(args):
         raise FileNotFoundError(2, "No such file or directory", "data/x.csv")

@@ -15,7 +15,8 @@ from study.identify.models import make_model
 from study.identify.output_error import DIVERGED, OutputErrorProblem, default_bounds, local_fit
 from study.identify.structures import make_structure
 from study.measure import MeasurementModel
-from study.sim import load_vessel, read_config, simulate
+from study.config import read_config
+from study.sim import load_vessel, simulate
 
 
 @pytest.fixture(scope="module")

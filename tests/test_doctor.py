@@ -20,10 +20,11 @@ import pandas as pd
 import pytest
 
 from study.doctor.diagnose import Doctor, Evaluation, Options
-from study.doctor.effects import effect_config
+from study.identify.effects import effect_config
 from study.measure import MeasurementModel
 from study.pipeline import resolve_effects
-from study.sim import load_vessel, read_config, simulate
+from study.config import read_config
+from study.sim import load_vessel, simulate
 
 VESSEL = read_config("vessel", "kvlcc2_l7")
 U0 = float(VESSEL["operation"]["U0"])
@@ -185,7 +186,7 @@ def test_bad_input_is_a_clear_error(tmp_path):
 
 def test_the_doctor_reads_a_comma_separated_list_of_patterns(tmp_path):
     """train=<glob>,<glob> as ``python -m study`` takes it; a pattern that matches nothing is named."""
-    from study.diagnose import load_records
+    from study.loaders import load_records
     from study.schema import Record, write_record
 
     df = simulate(load_vessel(VESSEL), "zigzag_10_10", duration=30.0)
@@ -296,7 +297,7 @@ def test_a_ladder_step_that_raises_the_error_is_rejected(monkeypatch):
 
 
 def test_a_flipped_rudder_is_refused_before_fitting():
-    from study.doctor.checks import RecordCheckError
+    from study.vessel_checks import RecordCheckError
 
     train, val = records([], duration=120.0)
     train[0]["delta"] = -train[0]["delta"]

@@ -1,4 +1,4 @@
-"""The doctor's manoeuvre metrics (study.doctor.maneuver_metrics): turning-circle and zigzag characteristics of a
+"""The doctor's manoeuvre metrics (study.maneuver_metrics): turning-circle and zigzag characteristics of a
 measured record against two model replays.
 
 Records: the 7 m KVLCC2 model (kvlcc2_l7), a 35 deg turning circle and a 20/10 zigzag, 1 % white noise, 10 Hz
@@ -12,10 +12,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from study.doctor.maneuver_metrics import maneuver_metrics, metrics_table_html
+from study.doctor.html import metrics_table_html
+from study.maneuver_metrics import maneuver_metrics
 from study.measure import MeasurementModel
 from study.metrics import turning_metrics, zigzag_metrics
-from study.sim import load_vessel, read_config, replay, simulate
+from study.config import read_config
+from study.sim import load_vessel, replay, simulate
 
 VESSEL = read_config("vessel", "kvlcc2_l7")
 L = float(VESSEL["particulars"]["Lpp"])
@@ -205,7 +207,7 @@ def test_the_doctor_replays_a_record_with_an_approach_from_the_manoeuvre_start()
     from types import SimpleNamespace
 
     from study.doctor.diagnose import manoeuvre_predictions
-    from study.doctor.maneuver_metrics import manoeuvre_start
+    from study.maneuver_metrics import manoeuvre_start
 
     v = load_vessel(VESSEL)
     t = np.arange(0.0, 160.0, 0.1)

@@ -116,7 +116,7 @@ class _Keep(Builder):
 
 
 def test_grand_figures_are_fit_for_print_and_keep_each_estimators_colour(tmp_path):
-    from study.studies import grand
+    from study.figures.studies import grand
 
     seen = {}
     for k, ests in enumerate((list(ESTIMATOR_STYLE)[:11], ["svr_nu", "ls", "emcee"])):
@@ -136,7 +136,7 @@ def test_emcee_figures_are_fit_for_print_and_the_band_is_visible(tmp_path):
     """emcee_kt on a synthetic table with a chain and a posterior-predictive band whose width is a thousandth of
     the motion (as on the exact KT model): the band is drawn again around the posterior median, where it fills
     the axes."""
-    from study.studies import emcee_kt
+    from study.figures.studies import emcee_kt
 
     rng = np.random.default_rng(1)
     runs, params = [], []

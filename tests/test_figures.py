@@ -123,7 +123,7 @@ def test_rebuilding_one_study_leaves_every_other_study_untouched(smoke, tmp_path
 def test_a_study_module_without_name_and_build_is_refused(tmp_path, monkeypatch):
     import importlib
 
-    from study.studies import discover
+    from study.figures.studies import discover
 
     pkg = tmp_path / "fake_studies"
     pkg.mkdir()
@@ -135,12 +135,42 @@ def test_a_study_module_without_name_and_build_is_refused(tmp_path, monkeypatch)
 
 
 def test_every_study_module_has_its_experiment_and_every_experiment_with_a_study_its_module():
-    from study.studies import discover
+    from study.config import simulated_studies
+    from study.figures.studies import discover
 
     found = discover()
     conf = REPO / "conf" / "experiment"
     named = {f.stem for f in conf.glob("*.yaml") if "\nstudy: " in "\n" + f.read_text()}
     assert set(found) == named, (sorted(found), sorted(named))
+    assert simulated_studies() == named  # the names a run on files may not join (study.records_run)
+
+
+def _discovered_studies() -> list:
+    from study.figures.studies import discover
+
+    return sorted(discover())
+
+
+@pytest.mark.parametrize("name", _discovered_studies())
+def test_every_study_follows_the_contract(name):
+    """Each discovered study (study/figures/studies/<name>.py) as tests/test_estimators.py checks each estimator:
+    its module names itself, says which seed paper's claim it tests (or None), builds through the builder with the
+    table's runs and parameters and appends its claims; its experiment (conf/experiment/<name>.yaml) runs it as a
+    sweep under its name. (Its figures rebuilt from a table: the tests above, on smoke and the committed tables.)"""
+    import inspect
+
+    from study.config import read_config
+    from study.figures.studies import discover
+
+    mod = discover()[name]
+    assert mod.NAME == name == mod.__name__.rpartition(".")[2]
+    assert mod.SEED is None or (isinstance(mod.SEED, str) and mod.SEED.isdigit() and len(mod.SEED) == 3)
+    assert (mod.__doc__ or "").strip(), "a study says what it shows and which claim it tests"
+    params = list(inspect.signature(mod.build).parameters)
+    assert len(params) >= 4 and params[1:4] == ["runs", "params", "claims"], params
+    exp = read_config("experiment", name)
+    assert exp.get("study") == name
+    assert ((exp.get("hydra") or {}).get("sweeper") or {}).get("params"), "a study is a sweep of its axes"
 
 
 def _from_committed_tables(out: Path, tmp_path: Path) -> str:

@@ -19,9 +19,10 @@ import pytest
 from study.identify.estimators import LeastSquares, list_estimators, make_estimator
 from study.identify.fit import prepare
 from study.identify.models import make_model
-from study.identify.regression import build
+from study.identify.fit import build
 from study.identify.structures import list_structures, make_structure
-from study.sim import list_configs, load_vessel, read_config, simulate
+from study.config import list_configs, read_config
+from study.sim import load_vessel, simulate
 
 TRAIN = ("zigzag_10_10", "zigzag_20_20", "random_rudder")
 #: structures whose truncation error allows a recovery test, with the tolerance of least squares on them
@@ -228,19 +229,19 @@ def test_build_is_a_clear_error_for_bad_names():
 
 
 def test_model_on_the_wrong_kind_is_skipped_with_the_reason():
-    from study.pipeline import _skip_reason
+    from study.run_common import skip_reason
 
     v = load_vessel("kvlcc2")
     model = make_model("abkowitz", v)
-    why = _skip_reason(model, make_structure("central"), make_estimator("ls"))
+    why = skip_reason(model, make_structure("central"), make_estimator("ls"))
     assert why and "abkowitz" in why and "mmg" in why
 
 
 def test_regression_estimators_skip_output_error_with_the_reason():
-    from study.pipeline import _skip_reason
+    from study.run_common import skip_reason
 
     v = load_vessel("kvlcc2")
-    why = _skip_reason(make_model("mmg_hull", v), make_structure("output_error"), make_estimator("ls"))
+    why = skip_reason(make_model("mmg_hull", v), make_structure("output_error"), make_estimator("ls"))
     assert why and "output error" in why
 
 

@@ -15,7 +15,8 @@ from scipy import signal
 
 from study import metrics
 from study.maneuvers import get_maneuver
-from study.sim import initial_state, load_vessel, read_config, replay, run, simulate
+from study.config import read_config
+from study.sim import initial_state, load_vessel, replay, run, simulate
 from study.sim.core import ENV_NAMES
 from study.sim.effects import ShallowWater
 from study.sim.linearize import (linear_sway_yaw, nomoto, nomoto_alpha, nomoto_linear, nomoto_truth,

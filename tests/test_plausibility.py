@@ -3,7 +3,7 @@
 Each broken record is made from a good one, written to a file and read back: a heading in degrees (unwrapped, so
 the old jump check misses it), a yaw rate in deg/s below 2 (a full-scale ship: the old limit misses it), both in
 degrees, time in milliseconds, speeds in knots, u, v off the track by a calibration factor, two records joined end
-to end, a position glitch, a channel not logged; n in rpm is a check against the vessel (study.doctor.checks), run
+to end, a position glitch, a channel not logged; n in rpm is a check against the vessel (study.vessel_checks), run
 on the record read from its file. Each error names the file, the column, the rows and the fix. Good records raise
 nothing and warn nothing: simulated records of every vessel kind at every noise definition (the real records of
 ../shared/data/real: tests/test_schema.py).
@@ -142,10 +142,10 @@ def test_plausibility_option(tmp_path, good):
 
 
 def test_n_in_rpm_is_checked_against_the_vessel(tmp_path):
-    """The schema cannot know the vessel's propeller speed: the doctor's check does it (study.doctor.checks), on
+    """The schema cannot know the vessel's propeller speed: the doctor's check does it (study.vessel_checks), on
     the record as read from its file (what `python -m study train=...` and `python -m study.diagnose` do)."""
-    from study.doctor.checks import RecordCheckError, check_records
-    from study.sim import read_config
+    from study.vessel_checks import RecordCheckError, check_records
+    from study.config import read_config
 
     df = _simulated("kvlcc2_l7", "zigzag_10_10", "low", **{"duration": 200})
     p = _write(tmp_path, df.assign(n=df["n"] * 60.0))

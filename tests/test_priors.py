@@ -11,7 +11,8 @@ from omegaconf import OmegaConf
 from study.app import CONF_DIR
 from study.identify.priors import empirical_mmg_hull, empirical_resistance, vessel_m_nd
 from study.pipeline import run_study
-from study.sim import load_vessel, read_config
+from study.config import read_config
+from study.sim import load_vessel
 
 CFG_KEYS = {"m_x": "m_x", "m_y": "m_y", "J_z": "J_z", "Xvv": "X_vv", "Xvr": "X_vr", "Xrr": "X_rr",
             "Xvvvv": "X_vvvv", "Yv": "Y_v", "Yr": "Y_r", "Yvvv": "Y_vvv", "Yvvr": "Y_vvr", "Yvrr": "Y_vrr",
@@ -146,11 +147,11 @@ def test_doctor_reports_which_coefficients_the_records_determine():
     yaw derivatives come out determined and near the truth, and the report names some nonlinear term as not
     determined, in a plain sentence."""
     from doctor_cases import MMG_HULL, make_records, perturbed_prior
-    from study.doctor.fit import DoctorProblem
+    from study.identify.with_effects import EffectsProblem
 
     train, _, truth_cfg = make_records({}, duration=200.0)
     prior_cfg = perturbed_prior(truth_cfg, MMG_HULL, 0.2)
-    P = DoctorProblem(prior_cfg, MMG_HULL, train, anchor=0.3)
+    P = EffectsProblem(prior_cfg, MMG_HULL, train, anchor=0.3)
     rows = {r["coefficient"]: r for r in P.identifiability(P.fit(()))}
     truth = load_vessel(truth_cfg)
     for n in ("Nv", "Nr", "Yv"):

@@ -756,8 +756,9 @@ def test_fingerprint_follows_the_source_of_the_components_a_run_uses(tmp_path, m
         assert "study/identify/estimators/svr.py" not in files and "study/sim/abkowitz.py" not in files
         assert "study/results.py" not in files and not any(f.startswith("study/figures") for f in files)
         assert "conf/maneuver/zigzag_10_10.yaml" in files  # read by name at run time
-        assert any(f.startswith("study/doctor/effects/") for f in before["model.effects=[current]"]["files"])
-        assert not any(f.startswith("study/doctor") for f in files)
+        assert any(f.startswith("study/identify/effects/") for f in before["model.effects=[current]"]["files"])
+        assert not any(f.startswith(("study/doctor", "study/identify/effects/", "study/identify/with_effects"))
+                       for f in files)  # identification with effects runs only with model.effects
 
         def edit(rel, text):
             p = copy / rel
@@ -774,15 +775,18 @@ def test_fingerprint_follows_the_source_of_the_components_a_run_uses(tmp_path, m
         after2 = fps()
         assert fingerprint.changed_components(after["vessel=mariner"], after2["vessel=mariner"]) == ["simulator"]
         assert after2[""] == before[""]
-        edit("study/identify/fit.py", "\n# a fix\n")  # imported by the models and the pipeline
+        edit("study/identify/fit.py", "\n# a fix\n")  # one identification: imported by the pipeline
         after3 = fps()
-        assert fingerprint.changed_components(after2[""], after3[""]) == ["model", "pipeline"]
+        assert fingerprint.changed_components(after2[""], after3[""]) == ["pipeline"]
+        edit("study/identify/models.py", "\n# a fix\n")  # what is identified: the model, and the pipeline imports it
+        after4 = fps()
+        assert fingerprint.changed_components(after3[""], after4[""]) == ["model", "pipeline"]
         edit("study/results.py", "\n# not part of any run\n")
-        assert fps() == after3
+        assert fps() == after4
         # line endings do not matter (a Windows checkout), contents do
         mmg = copy / "study/sim/mmg.py"
         mmg.write_bytes(mmg.read_bytes().replace(b"\n", b"\r\n"))
-        assert fps() == after3
+        assert fps() == after4
     finally:
         fingerprint.clear_cache()
 

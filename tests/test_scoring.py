@@ -81,7 +81,8 @@ def test_both_sampling_settings_is_an_error_naming_them(tmp_path):
 
 def test_a_second_order_model_of_a_first_order_truth_is_degenerate_not_exact():
     from study.identify.models import make_model
-    from study.sim import load_vessel, read_config
+    from study.config import read_config
+    from study.sim import load_vessel
 
     truth, how, exact = make_model(read_config("model", "nomoto2_nl"), load_vessel("kt1_mariner")).truth()
     assert not exact and how.startswith("degenerate") and truth["T2"] == 0.0

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from study.maneuvers import get_maneuver
-from study.sim import list_configs, load_vessel, read_config, simulate
+from study.config import list_configs, read_config
+from study.sim import load_vessel, simulate
 from study.sim.effects import Current, RudderDynamics, ShallowWater, Wind, YawBias, _ankudinov, _kijima_1990
 
 

@@ -1,4 +1,4 @@
-"""State estimation (study/identify/state_estimation.py): u, v, r and their derivatives from positions and
+"""State estimation (study/state_estimation.py): u, v, r and their derivatives from positions and
 heading by an EKF with an RTS smoother; the loader option ``states``; the smoothed structure's ``method: rts``;
 and the model doctor's verdict with estimated u, v, r.
 
@@ -26,11 +26,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from study.identify.state_estimation import DEFAULTS, estimate_states, noise_std, resolve_options
+from study.state_estimation import DEFAULTS, estimate_states, noise_std, resolve_options
 from study.identify.structures import Segment, make_structure, savgol_interior
 from study.measure import MeasurementModel
 from study.schema import SchemaError, read_record, read_records
-from study.sim import load_vessel, read_config, simulate
+from study.config import read_config
+from study.sim import load_vessel, simulate
 
 HEADING_STD = math.radians(0.15)
 #: (vessel, sample interval [s], position noise [m]) of the two scales
@@ -337,7 +338,7 @@ def test_doctor_gives_the_same_verdict_with_estimated_states(tmp_path):
     from doctor_cases import KNOWN, VESSEL, make_records
 
     from study.doctor.diagnose import Doctor, Options
-    from study.doctor.effects import effect_config
+    from study.identify.effects import effect_config
 
     example = effect_config("current")["example"]
     train, val, truth_cfg = make_records(example)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from doctor_cases import KNOWN, MMG_HULL, VESSEL, make_records, perturbed_prior
-from study.doctor.fit import DoctorProblem, Fit
+from study.identify.with_effects import EffectsProblem, Fit
 from study.doctor.turn_prediction import predict_turn
 
 
@@ -23,10 +23,10 @@ def case():
 def test_identified_hull_predicts_the_truths_turn_and_its_interval_holds_it(case):
     train, truth, prior_cfg = case
     none = Fit((), {}, {}, 0.0)
-    want = predict_turn(DoctorProblem(truth, KNOWN, train, effects={}), none, draws=0)["tactical_diameter_L"]
-    prior = predict_turn(DoctorProblem(prior_cfg, KNOWN, train, effects={}), none, draws=0)["tactical_diameter_L"]
+    want = predict_turn(EffectsProblem(truth, KNOWN, train, effects={}), none, draws=0)["tactical_diameter_L"]
+    prior = predict_turn(EffectsProblem(prior_cfg, KNOWN, train, effects={}), none, draws=0)["tactical_diameter_L"]
     assert abs(prior / want - 1.0) > 0.10  # the prior alone is far off: the records must do the work
-    pb = DoctorProblem(prior_cfg, MMG_HULL, train, effects={}, anchor=0.3)
+    pb = EffectsProblem(prior_cfg, MMG_HULL, train, effects={}, anchor=0.3)
     got = predict_turn(pb, pb.fit(()), draws=64, seed=1)
     assert got["tactical_diameter_L"] == pytest.approx(want, rel=0.03)
     assert got["finite_draws"] == 64
@@ -37,7 +37,7 @@ def test_identified_hull_predicts_the_truths_turn_and_its_interval_holds_it(case
 
 def test_fixed_rpm_and_own_self_propulsion_differ_when_resistance_does(case):
     train, truth, _ = case
-    pb = DoctorProblem(truth, KNOWN, train, effects={})
+    pb = EffectsProblem(truth, KNOWN, train, effects={})
     fit = Fit((), {}, {}, 0.0)
     own = predict_turn(pb, fit, draws=0)
     assert own["n"] == pytest.approx(pb.base.n0, rel=0.01)  # the config's n is its self-propulsion point

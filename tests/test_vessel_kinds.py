@@ -10,7 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from study.sim import KINDS, accelerations, list_configs, load_vessel, read_config, simulate
+from study.config import list_configs, read_config
+from study.sim import KINDS, accelerations, load_vessel, simulate
 from study.sim.effects import ShallowWater
 from study.sim.linearize import linear_sway_yaw, nomoto
 

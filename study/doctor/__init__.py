@@ -1,9 +1,13 @@
 """The model doctor: compare a model with measurements, show where it fails, name the missing physical effect,
 add it and watch the error fall (``python -m study.diagnose``).
 
-- :mod:`.effects`: the catalogue of candidate effects, how each enters the identification and the simulation;
-- :mod:`.fit`: identification of a model with a set of effects (variable projection), and its replay through
-  records;
+- :mod:`.run`: the doctor from a resolved configuration (records read, report folder held, runs logged);
 - :mod:`.diagnose`: baseline, candidates ranked by out-of-sample improvement, the error ladder, the verdict;
-- :mod:`.plots`, :mod:`.html`: the figures and the self-contained report.
+- :mod:`.plots`, :mod:`.html`: the figures and the self-contained report;
+- :mod:`.examples`, :mod:`.turn_prediction`: the worked examples and a turn predicted from zigzags.
+
+What the doctor uses is not its own: identification with a set of effects and its replay through records is
+``study.identify.with_effects``, the catalogue of candidate effects ``study.identify.effects`` (``.effects`` here
+keeps the old name for effects written against it), the record checks ``study.vessel_checks``, the manoeuvre
+metrics ``study.maneuver_metrics``.
 """

@@ -32,8 +32,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
-from .effects import list_effects, registry
-from .fit import CHANNELS, UNITS, DoctorProblem, diverged_records, record_error, record_errors, validation_error
+from ..identify.effects import list_effects, registry
+from ..identify.with_effects import (CHANNELS, UNITS, EffectsProblem, diverged_records, record_error, record_errors,
+                                   validation_error)
 
 #: the consistency test needs this many validation records (a paired t-test on fewer has no power)
 MIN_RECORDS_FOR_TEST = 3
@@ -46,7 +47,7 @@ class Options:
     tie: float = 0.10
     max_steps: int = 3
     candidates: tuple | None = None  # None: every discovered effect
-    structure: str | dict | None = None  # None: Savitzky-Golay over 0.2 L/U0 (see DoctorProblem)
+    structure: str | dict | None = None  # None: Savitzky-Golay over 0.2 L/U0 (see EffectsProblem)
     effect_path: tuple = ()  # extra folders of effect YAMLs (the user's own effects)
     checks: str = "error"  # the record checks that need the vessel: error | warn | off
     anchor: float | None = 0.3  # an identified model's coefficients anchored to the vessel config's, relative sd
@@ -152,18 +153,18 @@ class Doctor:
         self.val_names = _names(self.validate) if self.validate else self.train_names
         self.check_messages = []
         if self.opt.checks != "off":
-            from .checks import check_records
+            from ..vessel_checks import check_records
 
             self.check_messages = check_records(vessel_cfg, self.train + self.validate,
                                                 strict=self.opt.checks == "error")
-        self.problem = DoctorProblem(vessel_cfg, self.model_cfg, self.train, self.opt.structure, self.effects,
+        self.problem = EffectsProblem(vessel_cfg, self.model_cfg, self.train, self.opt.structure, self.effects,
                                      self.train_names, self.opt.anchor)
         self.val_df = [r.data if hasattr(r, "data") else r for r in self.validate]
         self.val_infos = [self.problem.info_for(df, getattr(r, "meta", None), n)
                           for r, df, n in zip(self.validate, self.val_df, self.val_names)]
         self.train_df = self.problem.records
         if self.mode == "held_out":
-            self.folds = [DoctorProblem(vessel_cfg, self.model_cfg, [r for j, r in enumerate(self.train) if j != i],
+            self.folds = [EffectsProblem(vessel_cfg, self.model_cfg, [r for j, r in enumerate(self.train) if j != i],
                                         self.opt.structure, self.effects,
                                         [n for j, n in enumerate(self.train_names) if j != i], self.opt.anchor)
                           for i in range(len(self.train))]
@@ -498,7 +499,7 @@ def manoeuvre_predictions(doctor: "Doctor", ev: Evaluation, whole: dict) -> dict
     """The replays the manoeuvre metrics compare: a record whose manoeuvre starts after an approach
     (``maneuver_metrics.manoeuvre_start``) replayed from the measured state at that start; any other record's
     whole-record replay (``whole``, from :func:`predictions`)."""
-    from .maneuver_metrics import manoeuvre_start
+    from ..maneuver_metrics import manoeuvre_start
 
     out = dict(whole)
     if doctor.mode == "given":
@@ -522,7 +523,7 @@ def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: 
     from pathlib import Path
 
     from . import plots
-    from .fit import residuals
+    from ..identify.with_effects import residuals
     from .html import render_html
 
     out = Path(out_dir)
@@ -574,7 +575,7 @@ def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: 
         "psi over the validation records) of the baseline and of each step with an effect added" +
         ("; a rejected step (its error not lower by 10 %) is hatched" if rej else "") +
         ("; a diverged replay is marked, with no bar" if div else "") + ".", "ladder")
-    from .maneuver_metrics import maneuver_metrics
+    from ..maneuver_metrics import maneuver_metrics
 
     mm = []
     mb = manoeuvre_predictions(doctor, base, pb)

@@ -32,21 +32,6 @@ COMMITTED = REPO / "paper_figs" / "doctor"
 DEFAULT_OUT = Path("doctor_examples")
 
 
-def _conf(**over) -> dict:
-    from hydra import compose, initialize_config_dir
-    from omegaconf import OmegaConf
-
-    from ..app import CONF_DIR
-
-    with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
-        cfg = compose(config_name="diagnose", overrides=[f"{k}={v}" for k, v in over.items()
-                                                         if k in ("vessel", "model")])
-    conf = OmegaConf.to_container(cfg, resolve=True)
-    conf.update(log_runs=False, overwrite=False)
-    conf.update({k: v for k, v in over.items() if k not in ("vessel", "model")})
-    return conf
-
-
 def simulated_current(tmp: Path, out: Path = DEFAULT_OUT, overwrite: bool = False) -> dict:
     import subprocess
     import sys
@@ -56,18 +41,18 @@ def simulated_current(tmp: Path, out: Path = DEFAULT_OUT, overwrite: bool = Fals
         subprocess.run([sys.executable, "-m", "study.simulate", "vessel=kvlcc2_l7", f"maneuver={m}",
                         "environment=current", "noise=low_relative", "noise.sample_dt=0.1", "sim.duration=300",
                         f"seed={len(stem)}", f"out={tmp / stem}.csv"], check=True, capture_output=True)
-    from ..diagnose import run
+    from .run import diagnose_conf, run
 
-    return run(_conf(vessel="kvlcc2_l7", train=f"{tmp}/train_*.csv", validate=f"{tmp}/val_*.csv",
+    return run(diagnose_conf(vessel="kvlcc2_l7", train=f"{tmp}/train_*.csv", validate=f"{tmp}/val_*.csv",
                      out=str(out / "simulated_current"), overwrite=overwrite))
 
 
 def esso_osaka(out: Path = DEFAULT_OUT, overwrite: bool = False) -> dict:
-    from ..diagnose import run
+    from .run import diagnose_conf, run
     from ..loaders import real_data_dir
 
     d = real_data_dir() / "esso_osaka_frt" / "data"
-    return run(_conf(vessel="esso_osaka", train=f"{d}/zigzag/*.csv", validate=f"{d}/turning/*.csv",
+    return run(diagnose_conf(vessel="esso_osaka", train=f"{d}/zigzag/*.csv", validate=f"{d}/turning/*.csv",
                      out=str(out / "esso_osaka"), overwrite=overwrite))
 
 
@@ -75,32 +60,33 @@ def esso_osaka_identified(out: Path = DEFAULT_OUT, overwrite: bool = False) -> d
     """Esso Osaka's MMG hull identified from its zigzags and random-rudder runs (the data papers' training
     set), anchored to its empirical prior (the config's hull), validated on all 14 measured turning circles: a
     turn from zigzags, on real records."""
-    from ..diagnose import run
+    from .run import diagnose_conf, run
     from ..loaders import real_data_dir
 
     d = real_data_dir() / "esso_osaka_frt" / "data"
-    return run(_conf(vessel="esso_osaka", model="mmg_hull", train=f"{d}/zigzag/*.csv,{d}/random/*.csv",
+    return run(diagnose_conf(vessel="esso_osaka", model="mmg_hull", train=f"{d}/zigzag/*.csv,{d}/random/*.csv",
                      validate=f"{d}/turning/*.csv", out=str(out / "esso_osaka_identified"), overwrite=overwrite))
 
 
 def kvlcc2_hsva(out: Path = DEFAULT_OUT, overwrite: bool = False) -> dict:
-    from ..diagnose import run
+    from .run import diagnose_conf, run
     from ..loaders import real_data_dir
 
     d = real_data_dir() / "kvlcc2_hsva" / "raw_data"
-    return run(_conf(vessel="kvlcc2_l7", train=f"{d}/HSVA_CPMC_KVLCC2_Z_*_0?.dat",
+    return run(diagnose_conf(vessel="kvlcc2_l7", train=f"{d}/HSVA_CPMC_KVLCC2_Z_*_0?.dat",
                      validate=f"{d}/HSVA_CPMC_KVLCC2_Z_*_10_?.dat", out=str(out / "kvlcc2_hsva"), overwrite=overwrite))
 
 
 def kvlcc2_hsva_identified(out: Path = DEFAULT_OUT, overwrite: bool = False) -> dict:
     """The HSVA zigzags again, with the MMG hull identified from them (anchored to the published set): the
     user's normal case."""
-    from ..diagnose import run
+    from .run import diagnose_conf, run
     from ..loaders import real_data_dir
 
     d = real_data_dir() / "kvlcc2_hsva" / "raw_data"
-    return run(_conf(vessel="kvlcc2_l7", model="mmg_hull", train=f"{d}/HSVA_CPMC_KVLCC2_Z_*_0?.dat",
-                     validate=f"{d}/HSVA_CPMC_KVLCC2_Z_*_10_?.dat", out=str(out / "kvlcc2_hsva_identified"), overwrite=overwrite))
+    return run(diagnose_conf(vessel="kvlcc2_l7", model="mmg_hull", train=f"{d}/HSVA_CPMC_KVLCC2_Z_*_0?.dat",
+                             validate=f"{d}/HSVA_CPMC_KVLCC2_Z_*_10_?.dat", out=str(out / "kvlcc2_hsva_identified"),
+                             overwrite=overwrite))
 
 
 def _turns(rep: dict) -> list:

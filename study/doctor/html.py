@@ -651,11 +651,55 @@ def _errors(r: dict) -> str:
     return _section("Errors per record and channel", table + _defs(r, terms, extra), "errors")
 
 
+# the manoeuvre metrics' table (rows of study.maneuver_metrics.maneuver_metrics)
+# ---------------------------------------------------------------------------------------------- HTML
+def _metric_num(x) -> str:
+    """3-4 significant digits; NaN, None, inf and non-numbers -> 'n/a'."""
+    if x is None or isinstance(x, bool) or not isinstance(x, numbers.Real):
+        return "n/a"
+    v = float(x)
+    if not math.isfinite(v):
+        return "n/a"
+    if v == 0:
+        return "0"
+    if 1e4 <= abs(v) < 1e9:
+        return f"{v:.0f}"
+    return f"{v:.4g}"
+
+
+def metrics_table_html(rows: list[dict]) -> str:
+    """A small self-contained HTML ``<table class="maneuver-metrics">`` of ``study.maneuver_metrics.maneuver_metrics``
+    rows: record, metric (its definition as a tooltip), unit, measured, baseline, final; numbers to 4 significant
+    digits, NaN as ``n/a``; every string escaped. No rows: a table with one row saying so."""
+    from ..maneuver_metrics import COLUMNS, TURNING_METRICS, ZIGZAG_METRICS
+
+    units = {m: u for m, u, _ in TURNING_METRICS + ZIGZAG_METRICS}
+    descriptions = {m: d for m, _, d in TURNING_METRICS + ZIGZAG_METRICS}
+    e = lambda x: html.escape("" if x is None else str(x), quote=True)  # noqa: E731
+    head = ('<table class="maneuver-metrics">\n<thead><tr><th>Record</th><th>Metric</th><th>Unit</th>'
+            '<th class="num">Measured</th><th class="num">Baseline</th><th class="num">Final</th></tr></thead>\n'
+            '<tbody>\n')
+    body = []
+    for r in rows or []:
+        if not isinstance(r, dict):
+            continue
+        m = r.get("metric")
+        tip = descriptions.get(str(m))
+        title = f' title="{e(tip)}"' if tip else ""
+        body.append(f'<tr><td class="record">{e(r.get("record"))}</td><td class="metric"{title}>{e(m)}</td>'
+                    f'<td class="unit">{e(r.get("unit", units.get(str(m), "")))}</td>'
+                    + "".join(f'<td class="num">{e(_metric_num(r.get(c)))}</td>' for c in COLUMNS) + "</tr>")
+    if not body:
+        body.append('<tr><td colspan="6" class="muted">No turning circle or zigzag among the validation records: '
+                    'no standard manoeuvre metrics.</td></tr>')
+    return head + "\n".join(body) + "\n</tbody>\n</table>"
+
+
 def _maneuvers(r: dict) -> str:
     rows = [x for x in _list(r.get("maneuver_metrics")) if isinstance(x, Mapping) and x.get("metric") is not None]
     if "maneuver_metrics" not in r or (not rows and not isinstance(r.get("maneuver_metrics"), list)):
         return ""
-    from .maneuver_metrics import TURNING_METRICS, ZIGZAG_METRICS, metrics_table_html
+    from ..maneuver_metrics import TURNING_METRICS, ZIGZAG_METRICS
 
     rows = [dict(x) for x in rows]
     table = metrics_table_html(rows)

@@ -1,8 +1,8 @@
 """What an identified model predicts for a manoeuvre nobody measured, and how sure it can be.
 
-:func:`predict_turn` simulates a fitted model (:class:`study.doctor.fit.DoctorProblem` and one of its fits)
-through a 35 deg turning circle (IMO MSC.137(76)) from a steady approach, and gives the tactical diameter and
-advance of the point estimate and of draws from the fit's Gaussian posterior (``DoctorProblem.posterior``: the
+:func:`predict_turn` simulates a fitted model (:class:`study.identify.with_effects.EffectsProblem` and one of its
+fits) through a 35 deg turning circle (IMO MSC.137(76)) from a steady approach, and gives the tactical diameter and
+advance of the point estimate and of draws from the fit's Gaussian posterior (``EffectsProblem.posterior``: the
 prior-anchored normal equations with the doctor's data weight), so a prediction extrapolated from zigzags comes
 with the spread its coefficients allow. The draws run in one compiled batch (``study.sim.simulate_batch``).
 
@@ -104,27 +104,26 @@ def kvlcc2_hsva_table(data_dir=None, draws: int = 64) -> pd.DataFrame:
     """The published KVLCC2 set against hulls identified from HSVA's nine 1-5 deg switch zigzags (the doctor's
     training records in ``study.doctor.examples``), each turned at 35 deg from HSVA's approach speed at its own
     self-propulsion rpm and at HSVA's measured rpm."""
-    from ..diagnose import load_records
-    from ..loaders import real_data_dir
-    from .effects import list_effects, registry
-    from .examples import _conf
-    from .fit import DoctorProblem, Fit
+    from ..identify.effects import list_effects, registry
+    from ..identify.with_effects import EffectsProblem, Fit
+    from ..loaders import load_records, real_data_dir
+    from .run import diagnose_conf
 
     d = Path(data_dir) if data_dir else real_data_dir() / "kvlcc2_hsva" / "raw_data"
     train = load_records(str(d / "HSVA_CPMC_KVLCC2_Z_*_0?.dat"), states="auto")
     u0 = float(np.median([r.data["u"].iloc[:50].mean() for r in train]))
     n_tank = float(np.median([r.data["n"].mean() for r in train]))
-    conf = _conf(vessel="kvlcc2_l7", model="mmg_hull")
+    conf = diagnose_conf(vessel="kvlcc2_l7", model="mmg_hull")
     effects = registry(list_effects())
     rows = []
-    known = DoctorProblem(conf["vessel"], {"name": "known", "type": "kind", "equations": {}}, train, None, effects)
+    known = EffectsProblem(conf["vessel"], {"name": "known", "type": "kind", "equations": {}}, train, None, effects)
     published = Fit((), {}, {}, float("nan"))
     problems = {}
     for label, anchor, effs in (("published set (Yasukawa & Yoshimura 2015)", None, ()),) + CASES:
         if anchor is None:
             pb, fit = known, published
         else:
-            pb = problems.setdefault(anchor, DoctorProblem(conf["vessel"], conf["model"], train, None, effects,
+            pb = problems.setdefault(anchor, EffectsProblem(conf["vessel"], conf["model"], train, None, effects,
                                                            None, anchor))
             fit = pb.fit(effs)
         own = predict_turn(pb, fit, u0=u0, draws=draws)

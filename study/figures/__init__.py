@@ -4,7 +4,7 @@ Reads ``<results>/runs.parquet``, ``params.parquet`` (rebuilt from the records i
 the runs (``<results>/artefacts/<run_id>/``: correlation matrices, L-curves, online convergence, emcee chains,
 validation traces and posterior-predictive bands). Nothing is simulated or fitted here: every number is one the
 runs logged. Each named study (``conf/experiment/<name>.yaml``, its figures and claim in
-``study/studies/<name>.py``) that has finished runs in the table is rebuilt into ``paper_figs/<name>/``; its
+``study/figures/studies/<name>.py``) that has finished runs in the table is rebuilt into ``paper_figs/<name>/``; its
 outputs and claim are listed in ``paper_figs/<name>/index.json``, from which the folder's ``README.md`` and
 ``CLAIMS.md`` are composed. **A rebuild never destroys**: a study without runs in the table keeps its folder,
 its index and its rows of ``README.md`` and ``CLAIMS.md`` as they are; a rebuilt study's folder loses only the
@@ -194,7 +194,7 @@ def build(results: Path | None, out: Path, table: bool = True) -> Builder:
     committed under ``out``); compose README.md and CLAIMS.md from every study's index in ``out`` (rebuilt now
     or before)."""
     from ..results import ResultStore
-    from ..studies import discover
+    from .studies import discover
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -210,7 +210,7 @@ def build(results: Path | None, out: Path, table: bool = True) -> Builder:
         sources = {n: (runs, params, None) for n in present}
         b = Builder(Path(results), out)
     for name in sorted(set(sources) - set(studies)):
-        print(f"study.figures: the table has runs of study '{name}' but no module study/studies/{name}.py; "
+        print(f"study.figures: the table has runs of study '{name}' but no module study/figures/studies/{name}.py; "
               f"nothing built for it", file=sys.stderr)
     for name, mod in studies.items():
         if name in sources:

@@ -2,8 +2,8 @@
 figures, CSV and Markdown tables, byte-stable between rebuilds), the results table as the figures read it
 (:func:`load_tables`), and the plots and tables several studies share (drift heatmaps, fit times, collinearity,
 validation traces, L-curves, online convergence, emcee posteriors). A study's own figures and its claim live in
-its module of :mod:`study.studies`; how every figure looks (colours and markers per estimator and structure, fonts,
-log ticks, units) is :mod:`study.figures.style`."""
+its module of :mod:`study.figures.studies`; how every figure looks (colours and markers per estimator and
+structure, fonts, log ticks, units) is :mod:`study.figures.style`."""
 from __future__ import annotations
 
 import io

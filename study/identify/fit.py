@@ -3,7 +3,9 @@ per-parameter and multicollinearity results of one run.
 
 ``identify(model, structure, estimator_cfg, records)`` is what a study run (``study.pipeline``) and the model
 doctor call; it returns an :class:`Identification` (estimates in the model's physical parameters, parameter
-rows for the results table, scalar metrics, artefact files).
+rows for the results table, scalar metrics, artefact files). ``make_problem`` builds a run's output-error problem
+(``study.identify.output_error``) around the equation-error estimate; ``build`` stacks the regression rows of a
+model config on records (for tests and notebooks).
 """
 from __future__ import annotations
 
@@ -192,8 +194,6 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
     coef_rows = []  # (equation, column name, estimate, extras)
     samples = {}  # column name -> posterior draws
     if structure.simulates:
-        from .output_error import make_problem
-
         t0 = time.perf_counter()
         problem = make_problem(model, structure, records, seed=seed)
         timings["regressors"] = time.perf_counter() - t0
@@ -323,6 +323,65 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
             idx = np.unique(np.linspace(0, m - 1, min(MAX_DRAWS, m)).astype(int))
             draws = {n: np.asarray(phys[n], float)[idx] for n in names}
     return Identification(estimates, params, metrics, artefacts, timings, draws)
+
+
+# ---------------------------------------------------------------------- the output-error problem of a run
+def equation_error_start(model, records) -> dict:
+    """Least squares on central differences (equation error): the output-error problem's initial estimate."""
+    from .structures import make_structure
+
+    ident = identify(model, make_structure({"name": "central"}),
+                     {"name": "ls", "_target_": "study.identify.estimators.linear.LeastSquares", "params": {}},
+                     records)
+    return {n: ident.estimates[n] for n in model.oe_names}
+
+
+def make_problem(model, structure, records, seed: int = 0):
+    """The output-error problem (``study.identify.output_error.OutputErrorProblem``) of a study run from the
+    ``output_error`` block of the structure config, centred on the equation-error estimate."""
+    from .output_error import OutputErrorProblem, default_bounds
+
+    cfg = structure.output_error or {}
+    x0 = equation_error_start(model, records)
+    bounds = default_bounds(model, x0, cfg)
+    return OutputErrorProblem(model, records, outputs=cfg.get("outputs"), x0=x0, bounds=bounds,
+                              substeps=int(cfg.get("substeps", 1)),
+                              initial_state=cfg.get("initial_state", "estimate"))
+
+
+# ------------------------------------------------------------------ rows of a model config, for notebooks
+@dataclass
+class Regression:
+    """Per equation: regressor matrix, target, column names, truth values (when the columns are parameters)."""
+
+    Phi: dict
+    y: dict
+    names: dict
+    truth: dict
+    n_samples: int
+
+
+def build(vessel, model, records, structure) -> Regression:
+    """Stack the (unprocessed) regression rows of every record for a model config and a structure name.
+
+    A convenience for tests and notebooks; the study's runs go through :func:`identify`.
+    """
+    from .models import make_model
+    from .structures import make_structure
+
+    m = make_model(model, vessel)
+    skip, why = m.skip(None)
+    if skip:
+        raise ValueError(why)
+    s = make_structure(structure)
+    rows = regression_rows(m, s, records)
+    truth, _, _ = m.truth()
+    out = Regression({}, {}, {}, {}, 0)
+    for eq, (Phi, y, _seg) in rows.items():
+        out.Phi[eq], out.y[eq], out.names[eq] = Phi, y, list(m.equations[eq])
+        out.truth[eq] = [truth.get(c, np.nan) for c in m.equations[eq]]
+        out.n_samples = int(len(y))
+    return out
 
 
 def _all(eqs: dict) -> set:

@@ -26,7 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..sim import Vessel, read_config
+from ..config import read_config
+from ..sim import Vessel
 
 EQUATIONS = ("X", "Y", "N")
 

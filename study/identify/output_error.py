@@ -34,7 +34,7 @@ STATE = ("u", "v", "r", "x0", "y0", "psi")
 #: cost of a simulation that diverged (NaN/inf): worse than any finite one, but finite for the optimisers
 DIVERGED = 1e12
 #: a replay is stopped as diverged when it leaves this envelope: speed over 5 times the service speed, yaw rate
-#: over 20 U0/L (a full turn in a third of a ship length's travel; both as the doctor's, study.doctor.fit), sway
+#: over 20 U0/L (a full turn in a third of a ship length's travel; both as study.identify.with_effects's), sway
 #: velocity over 2 U0 (a ship sliding sideways at twice its service speed). Assumption: no ship manoeuvres there,
 #: so no record can ask for it.
 ENVELOPE = {"speed_U0": 5.0, "r_U0_L": 20.0, "v_U0": 2.0}
@@ -263,27 +263,6 @@ def default_bounds(model, x0: dict | None, cfg: dict) -> np.ndarray:
         w = max(rel * abs(x0[n]), floor * big[eq_of[n]], 1e-12)
         out.append([x0[n] - w, x0[n] + w])
     return np.array(out)
-
-
-def equation_error_start(model, records) -> dict:
-    """Least squares on central differences (equation error): the output-error problem's initial estimate."""
-    from .fit import identify
-    from .structures import make_structure
-
-    ident = identify(model, make_structure({"name": "central"}),
-                     {"name": "ls", "_target_": "study.identify.estimators.linear.LeastSquares", "params": {}},
-                     records)
-    return {n: ident.estimates[n] for n in model.oe_names}
-
-
-def make_problem(model, structure, records, seed: int = 0) -> OutputErrorProblem:
-    """The output-error problem of a study run from the ``output_error`` block of the structure config."""
-    cfg = structure.output_error or {}
-    x0 = equation_error_start(model, records)
-    bounds = default_bounds(model, x0, cfg)
-    return OutputErrorProblem(model, records, outputs=cfg.get("outputs"), x0=x0, bounds=bounds,
-                              substeps=int(cfg.get("substeps", 1)),
-                              initial_state=cfg.get("initial_state", "estimate"))
 
 
 def local_fit(problem: OutputErrorProblem, x0, max_nfev: int = 200):

@@ -16,8 +16,6 @@ operator, the measured velocities through its derivative ``d``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from ..sim import Vessel, accelerations
@@ -48,38 +46,3 @@ def kind_regressors(vessel: Vessel, P0: np.ndarray, idx: list, nodes: dict, raw:
         return y, np.zeros(y.shape + (0,))
     phi = np.stack([ops.value((A[4 + j] - a0) @ M.T / scale) for j in range(k)], axis=2)
     return y, phi
-
-
-@dataclass
-class Regression:
-    """Per equation: regressor matrix, target, column names, truth values (when the columns are parameters)."""
-
-    Phi: dict
-    y: dict
-    names: dict
-    truth: dict
-    n_samples: int
-
-
-def build(vessel: Vessel, model, records, structure) -> Regression:
-    """Stack the (unprocessed) regression rows of every record for a model config and a structure name.
-
-    A convenience for tests and notebooks; the study's runs go through ``study.identify.fit``.
-    """
-    from .fit import regression_rows
-    from .models import make_model
-    from .structures import make_structure
-
-    m = make_model(model, vessel)
-    skip, why = m.skip(None)
-    if skip:
-        raise ValueError(why)
-    s = make_structure(structure)
-    rows = regression_rows(m, s, records)
-    truth, _, _ = m.truth()
-    out = Regression({}, {}, {}, {}, 0)
-    for eq, (Phi, y, _seg) in rows.items():
-        out.Phi[eq], out.y[eq], out.names[eq] = Phi, y, list(m.equations[eq])
-        out.truth[eq] = [truth.get(c, np.nan) for c in m.equations[eq]]
-        out.n_samples = int(len(y))
-    return out

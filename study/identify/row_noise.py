@@ -23,7 +23,8 @@ coefficients are generalised least squares (GLS) and the likelihood is profiled 
 JASA 72, 320-338; the Gaussian profile likelihood of a regression with a parametric covariance). Each evaluation
 is a banded Cholesky factorisation (LAPACK pbtrf), O(n b^2) for n rows and bandwidth b.
 
-The posterior: GLS is least squares on the whitened rows ``C^-1 X, C^-1 y`` (``C C^T = Sigma``); its covariance is
+The posterior (``study.identify.estimators.prior.gls_posterior``, beside the MAP estimator's posterior it uses):
+GLS is least squares on the whitened rows ``C^-1 X, C^-1 y`` (``C C^T = Sigma``); its covariance is
 the block cluster-robust sandwich of those rows (``study.identify.estimators.prior.data_covariance``, the MAP
 estimator's: Mueller 2013's sandwich posterior), so what the noise model misses (a regressor's gain changing along
 the record, coloured noise, slow model error) still counts: weighted least squares with robust inference
@@ -39,7 +40,7 @@ to first order (small noise); the regressors' noise enters ``e`` but is not mode
 whitening from undoing a differencing (diff_center's random split) it biases the estimate beyond any interval.
 Not modelled, because it is no sampling noise: a structure's truncation error (euler's O(h)), which a
 noise-free record has too; the posterior then covers the structure's noise-free limit, not the truth
-(``study.identify.calibration`` measures both). Numerical limit: the covariance of twice-differenced rows
+(``study.calibration`` measures both). Numerical limit: the covariance of twice-differenced rows
 (diff_center) is ill-conditioned like n^4; at 41,700 rows it is no longer positive definite in doubles.
 """
 from __future__ import annotations
@@ -188,34 +189,3 @@ class RowNoise:
     def whiten(self, A: np.ndarray) -> np.ndarray:
         """``C^-1 A`` with ``C C^T = Sigma(Q)`` (the fitted ``Q``, up to its scale)."""
         return linalg.solve_banded((self.b, 0), self._chol, np.asarray(A, float))
-
-
-def gls_posterior(X: np.ndarray, y: np.ndarray, operators: RowOperators, mean0: np.ndarray, sd0: np.ndarray,
-                  q_raw: np.ndarray | None = None):
-    """(posterior mean, covariance, diagnostics, noise model) of ``y = X theta + e`` under
-    ``theta ~ N(mean0, sd0^2)``, with the rows' noise modelled by the structure's operators (module docstring): the
-    noise model fitted by maximum likelihood (or ``q_raw`` taken as given), the rows whitened, and the MAP
-    estimator's sandwich posterior (``study.identify.estimators.prior.gaussian_posterior``, prior not widened) of
-    the whitened rows."""
-    from .estimators.prior import gaussian_posterior
-
-    X, y = np.asarray(X, float), np.asarray(y, float)
-    k = X.shape[1]
-    if operators.centred:  # the centring's constant: a free intercept (see RowOperators)
-        X = np.column_stack([X, np.ones(len(y))])
-        mean0, sd0 = np.r_[mean0, 0.0], np.r_[sd0, np.inf]
-    noise = RowNoise(operators.operators)
-    noise = noise.fit(X, y) if q_raw is None else noise.use(q_raw)
-    Xw, yw = noise.whiten(X), noise.whiten(y)
-    mean, cov, diag = gaussian_posterior(Xw, yw, mean0, sd0, widen=False)
-    resid = y - X @ mean
-    rw = yw - Xw @ mean
-    rw = rw - rw.mean()
-    acf = [float(rw[j:] @ rw[:-j] / (rw @ rw)) if rw @ rw > 0 else 0.0 for j in (1, 2)]
-    mean, cov = mean[:k], cov[:k, :k]
-    diag = {"whitened": 1.0, "sigma": float(np.sqrt(np.mean(resid ** 2))), "data_blocks": diag["data_blocks"],
-            "noise_bandwidth": float(noise.b), "noise_evaluations": float(noise.evaluations_),
-            # autocorrelation left in the whitened residual at lags 1 and 2 (near 0 when the model holds)
-            "whitened_acf1": acf[0], "whitened_acf2": acf[1],
-            **{f"noise_Q{i}{j}": float(noise.Q[i, j]) for i in range(noise.m) for j in range(i, noise.m)}}
-    return mean, cov, diag, noise

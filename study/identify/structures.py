@@ -20,7 +20,7 @@ becomes the rows ``d(x, p) = sum_i theta_i value(f_i(nodes))``:
   window at each end is dropped (the end fits are one-sided). With ``smoothing.method: rts`` the states
   ``u, v, r`` and their derivatives come instead from an extended Kalman filter with a Rauch-Tung-Striebel
   smoother over the segment's positions, heading and measured ``u, v, r``
-  (``study.identify.state_estimation``; options under ``smoothing.rts``); every other signal (rudder,
+  (``study.state_estimation``; options under ``smoothing.rts``); every other signal (rudder,
   propeller, wind...) is smoothed and differentiated by Savitzky-Golay as before, and the same rows are kept
   (the half window at each end dropped), so the two methods differ only in the states.
 - ``diff_center``: a base structure (``euler`` as in seed 000), then its rows differenced,
@@ -311,7 +311,7 @@ class Structure:
         need = ("x0", "y0", "psi")
         if not all(c in seg.data for c in need):
             return None
-        from .state_estimation import estimate_states
+        from ..state_estimation import estimate_states
 
         key = (len(seg.t), hash(np.asarray(seg.t, float).tobytes()),
                tuple(hash(np.asarray(seg.data[c], float).tobytes()) for c in need))
@@ -520,7 +520,7 @@ SMOOTHING_METHODS = ("savgol", "rts")
 def make_structure(cfg) -> Structure:
     """A :class:`Structure` from its config dict (or config name)."""
     if isinstance(cfg, str):
-        from ..sim import read_config
+        from ..config import read_config
 
         cfg = read_config("structure", cfg)
     cfg = dict(cfg)
@@ -545,7 +545,7 @@ def make_structure(cfg) -> Structure:
         if kind != "smoothed":
             raise ValueError(f"structure '{name}': smoothing.method rts belongs to the smoothed structure, not "
                              f"'{kind}'")
-        from .state_estimation import resolve_options
+        from ..state_estimation import resolve_options
 
         resolve_options(sm.get("rts"))  # a misspelt option fails here, before any run
     return Structure(name=name, kind=kind, simulates=kind == "output_error", base=base,
@@ -557,7 +557,7 @@ def make_structure(cfg) -> Structure:
 
 
 def list_structures() -> list[str]:
-    from ..sim import list_configs
+    from ..config import list_configs
 
     return list_configs("structure")
 

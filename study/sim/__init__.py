@@ -10,39 +10,23 @@ A vessel *kind* is a module with ``KIND``, ``PARAM_NAMES``, ``COEFF_SECTION``, `
 ``accel`` (numba) and ``pack(cfg)``; optionally ``ADDED_MASS_KEYS``, ``solve_n(params, U0)`` for
 self-propulsion, and ``KINEMATIC_SWAY = False`` with ``aux_state_at_rest(P, delta)`` for a model without a
 sway velocity that carries an auxiliary state in the integrator's ``v_w`` slot instead (``nomoto``: see
-``study.sim.core``). Kinds are discovered from ``KINDS`` below; adding one is one module plus one line.
+``study.sim.core``). Kinds are listed in ``KINDS`` (``kinds.py``); adding one is one module plus one line there.
+Manoeuvres (``study.maneuvers``) and configs (``study.config``) come from the layer below: this package only
+simulates.
 """
 from __future__ import annotations
 
-import importlib
 import math
 from dataclasses import dataclass, field
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 import pandas as pd
-import yaml
 
+from ..config import read_config as _read_config  # private: configs are read from study.config
 from .core import ENV_NAMES, OUT_NAMES, make_integrator
 from .effects import apply_effects, env_vector, make_effect
-
-CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
-
-# kind name -> module path (one line per kind)
-KINDS = {
-    "mmg": "study.sim.mmg",
-    "waterjet": "study.sim.waterjet",
-    "abkowitz": "study.sim.abkowitz",
-    "auv": "study.sim.auv",
-    "nomoto": "study.sim.nomoto",
-}
-
-
-def get_kind(name: str):
-    if name not in KINDS:
-        raise ValueError(f"unknown vessel kind '{name}'; known kinds: {sorted(KINDS)}")
-    return importlib.import_module(KINDS[name])
+from .kinds import KINDS, get_kind  # noqa: F401 - KINDS re-exported (study.sim.KINDS)
 
 
 @lru_cache(maxsize=None)
@@ -50,20 +34,6 @@ def integrator(kind_name: str):
     """Compiled batch integrator of a kind (compiled once per process, on first use)."""
     kind = get_kind(kind_name)
     return make_integrator(kind.accel, len(kind.PARAM_NAMES), getattr(kind, "KINEMATIC_SWAY", True))
-
-
-def read_config(group: str, name: str) -> dict:
-    """Read ``conf/<group>/<name>.yaml`` as a plain dict (outside Hydra: tests, the simulate CLI)."""
-    path = CONF_DIR / group / f"{name}.yaml"
-    if not path.exists():
-        known = sorted(p.stem for p in (CONF_DIR / group).glob("*.yaml"))
-        raise ValueError(f"no {group} config '{name}' ({path}); known: {known}")
-    with open(path) as fh:
-        return yaml.safe_load(fh)
-
-
-def list_configs(group: str) -> list[str]:
-    return sorted(p.stem for p in (CONF_DIR / group).glob("*.yaml"))
 
 
 @dataclass
@@ -115,7 +85,7 @@ def _as_effects(effects) -> list:
 
 def load_vessel(vessel, effects=()) -> Vessel:
     """Build a :class:`Vessel` from a config name or dict, applying the effects in order."""
-    cfg = read_config("vessel", vessel) if isinstance(vessel, str) else dict(vessel)
+    cfg = _read_config("vessel", vessel) if isinstance(vessel, str) else dict(vessel)
     effects = _as_effects(effects)
     cfg, env = apply_effects(cfg, effects)
     kind = get_kind(cfg["kind"])

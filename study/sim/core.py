@@ -33,6 +33,7 @@ import numpy as np
 from numba import njit
 from numba.core.compiler import Compiler
 
+from ..maneuvers import CTRL_OPEN, CTRL_ZIGZAG  # the controller programmes' codes (study.maneuvers)
 from . import fastmath as fm
 
 # Environment/actuator parameters appended to each kind's parameters. Sources:
@@ -51,9 +52,6 @@ ENV_NAMES = (
 N_ENV = len(ENV_NAMES)
 OUT_NAMES = ("u", "v", "r", "x0", "y0", "psi", "delta", "n", "delta_cmd")
 
-# Controller codes (see ``study.maneuvers``): 0 open loop (command series), 1 zigzag programme,
-# 2 turning circle with pull-out.
-CTRL_OPEN, CTRL_ZIGZAG, CTRL_TURN = 0, 1, 2
 
 
 # Flags of the compiled loops. error_model='numpy': no ZeroDivisionError branches (they would stop the batch
@@ -424,12 +422,14 @@ def _fingerprint(accel, n_kind_params: int, kinematic_sway: bool = True) -> int:
 
     numba's cache checks this file's time stamp and the function's own code only; functions reached through
     ``accel`` (the kind's module, ``fastmath``, shared helpers) are covered by hashing the sources of this
-    package and of the kind's module, plus the kind's tag and accel's code.
+    package, of ``study/maneuvers.py`` (the controller codes) and of the kind's module, plus the kind's tag and
+    accel's code.
     """
     py = getattr(accel, "py_func", accel)
     h = hashlib.sha256(_kind_tag(accel, n_kind_params, kinematic_sway).encode())
     h.update(py.__code__.co_code)
     files = set(Path(__file__).resolve().parent.glob("*.py"))
+    files.add(Path(__file__).resolve().parents[1] / "maneuvers.py")  # the controller codes (CTRL_*)
     mod = sys.modules.get(py.__module__)
     if mod is not None and getattr(mod, "__file__", None):
         files.add(Path(mod.__file__).resolve())

@@ -211,7 +211,7 @@ class ShallowWater:
         fac = self.factors(vessel_cfg)
         if not fac:
             return
-        from . import get_kind
+        from .kinds import get_kind
 
         kind = get_kind(vessel_cfg["kind"])
         H = 1.0 / float(self.h_T)

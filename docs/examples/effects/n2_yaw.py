@@ -9,7 +9,7 @@ Use: ``python -m study.diagnose ... effect_path=docs/examples/effects`` with thi
 """
 import numpy as np
 
-from study.doctor.effects import Effect
+from study.identify.effects import Effect
 
 
 class YawFromPropeller(Effect):

@@ -21,7 +21,7 @@ __all__ = ["Estimator", "LeastSquares", "as_arrays", "estimator_class", "list_es
 
 def list_estimators() -> list[str]:
     """Names of the estimator configs (``conf/estimator/*.yaml``)."""
-    from ...sim import list_configs
+    from ...config import list_configs
 
     return list_configs("estimator")
 
@@ -43,7 +43,7 @@ def estimator_class(cfg: dict):
 def make_estimator(cfg, **overrides) -> Estimator:
     """An estimator from its config (dict or config name), hyper-parameters from ``params`` + overrides."""
     if isinstance(cfg, str):
-        from ...sim import read_config
+        from ...config import read_config
 
         cfg = read_config("estimator", cfg)
     params = dict(cfg.get("params") or {})

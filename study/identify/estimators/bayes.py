@@ -211,8 +211,7 @@ class EmceeSampler(Estimator):
         'regression' likelihood and the default prior: what :meth:`fit` samples, in closed form (the calibration
         study uses it on many datasets and checks the sampler against it on a few). ``q_raw``, ``prior_sd``: a
         noise mix and prior widths taken as given (the same likelihood on other rows, e.g. noise-free ones)."""
-        from ..row_noise import gls_posterior
-        from .prior import gaussian_posterior
+        from .prior import gaussian_posterior, gls_posterior
 
         X, y, _ = as_arrays(X, y)
         k = X.shape[1]

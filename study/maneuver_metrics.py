@@ -1,8 +1,10 @@
-"""The doctor's comparison in the ship's own terms: standard manoeuvre metrics of each validation record,
-measured against the baseline and the final model's replays.
+"""A replayed model compared in the ship's own terms: standard manoeuvre metrics of each validation record,
+measured against the replays of two models (the doctor's baseline and final model; a run on files' identified
+model).
 
 :func:`maneuver_metrics` gives one row per record and metric, ``{'record', 'metric', 'unit', 'measured',
-'baseline', 'final'}``; :func:`metrics_table_html` renders such rows as a small HTML table. The metrics are those
+'baseline', 'final'}``; ``study.doctor.html.metrics_table_html`` renders such rows as a small HTML table (the
+doctor's report). The metrics are those
 of :mod:`study.metrics` (IMO MSC.137(76), MSC/Circ.1053, ITTC 7.5-04-02-01), computed with the same functions on
 the measured record and on both replays:
 
@@ -44,16 +46,14 @@ Choices made here:
 """
 from __future__ import annotations
 
-import html
 import math
-import numbers
 
 import numpy as np
 import pandas as pd
 
-from .. import metrics as M
+from . import metrics as M
 
-__all__ = ["maneuver_metrics", "metrics_table_html", "TURNING_METRICS", "ZIGZAG_METRICS"]
+__all__ = ["maneuver_metrics", "TURNING_METRICS", "ZIGZAG_METRICS"]
 
 _NAN = float("nan")
 
@@ -75,8 +75,6 @@ ZIGZAG_METRICS = (
     ("time_to_check_yaw", "s", "time from the first rudder reversal to the heading's extreme"),
 )
 COLUMNS = ("measured", "baseline", "final")
-_UNITS = {m: u for m, u, _ in TURNING_METRICS + ZIGZAG_METRICS}
-_DESCRIPTIONS = {m: d for m, _, d in TURNING_METRICS + ZIGZAG_METRICS}
 
 STEADY_TOLS = (0.02, 0.05, 0.1, 0.2)  # bands tried for the steady turn (see _steady_tol)
 _BIG = 0.8  # the rudder "holds" the manoeuvre's angle P when |delta| >= 0.8 P (see _own_kind)
@@ -296,42 +294,3 @@ def maneuver_metrics(name: str, measured: pd.DataFrame, baseline: pd.DataFrame |
         spec = ZIGZAG_METRICS
     return [{"record": str(name), "metric": m, "unit": u, **{c: v[m] for c, v in zip(COLUMNS, vals)}}
             for m, u, _ in spec]
-
-
-# ---------------------------------------------------------------------------------------------- HTML
-def _num(x) -> str:
-    """3-4 significant digits; NaN, None, inf and non-numbers -> 'n/a'."""
-    if x is None or isinstance(x, bool) or not isinstance(x, numbers.Real):
-        return "n/a"
-    v = float(x)
-    if not math.isfinite(v):
-        return "n/a"
-    if v == 0:
-        return "0"
-    if 1e4 <= abs(v) < 1e9:
-        return f"{v:.0f}"
-    return f"{v:.4g}"
-
-
-def metrics_table_html(rows: list[dict]) -> str:
-    """A small self-contained HTML ``<table class="maneuver-metrics">`` of :func:`maneuver_metrics` rows: record,
-    metric (its definition as a tooltip), unit, measured, baseline, final; numbers to 4 significant digits, NaN
-    as ``n/a``; every string escaped. No rows: a table with one row saying so."""
-    e = lambda x: html.escape("" if x is None else str(x), quote=True)  # noqa: E731
-    head = ('<table class="maneuver-metrics">\n<thead><tr><th>Record</th><th>Metric</th><th>Unit</th>'
-            '<th class="num">Measured</th><th class="num">Baseline</th><th class="num">Final</th></tr></thead>\n'
-            '<tbody>\n')
-    body = []
-    for r in rows or []:
-        if not isinstance(r, dict):
-            continue
-        m = r.get("metric")
-        tip = _DESCRIPTIONS.get(str(m))
-        title = f' title="{e(tip)}"' if tip else ""
-        body.append(f'<tr><td class="record">{e(r.get("record"))}</td><td class="metric"{title}>{e(m)}</td>'
-                    f'<td class="unit">{e(r.get("unit", _UNITS.get(str(m), "")))}</td>'
-                    + "".join(f'<td class="num">{e(_num(r.get(c)))}</td>' for c in COLUMNS) + "</tr>")
-    if not body:
-        body.append('<tr><td colspan="6" class="muted">No turning circle or zigzag among the validation records: '
-                    'no standard manoeuvre metrics.</td></tr>')
-    return head + "\n".join(body) + "\n</tbody>\n</table>"

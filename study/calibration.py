@@ -48,9 +48,9 @@ def make_case(vessel: str, model: str, train: list, noise: str = "low", sample_d
               sample_dt_LU: float | None = None, sim: dict | None = None, name: str = "") -> Case:
     """The case of ``vessel`` (config name) identified with ``model`` from the ``train`` manoeuvres, measured with
     the ``noise`` config (optionally resampled at ``sample_dt`` s or ``sample_dt_LU`` L/U0)."""
-    from ..pipeline import simulate_set, vessels_for
-    from ..sim import read_config
-    from .models import make_model
+    from .config import read_config
+    from .identify.models import make_model
+    from .pipeline import simulate_set, vessels_for
 
     nz = dict(read_config("noise", noise))
     if sample_dt is not None:
@@ -68,7 +68,7 @@ def make_case(vessel: str, model: str, train: list, noise: str = "low", sample_d
 def records(case: Case, seed: int, noise_free: bool = False) -> list:
     """The training records of dataset ``seed`` (the noise a run with this seed draws), or noise-free ones sampled
     alike."""
-    from ..pipeline import measurement
+    from .pipeline import measurement
 
     conf = case.conf
     if noise_free:
@@ -110,8 +110,8 @@ def _limit(model, names, mean) -> dict:
 def dataset_intervals(case: Case, structure, seed: int, likelihood: str = "regression", level: float = 0.9,
                       draws: int = 4000) -> list[dict]:
     """One dataset: per reported parameter its estimate, interval, truth and the structure's noise-free limit."""
-    from .estimators.bayes import EmceeSampler
-    from .fit import prepare
+    from .identify.estimators.bayes import EmceeSampler
+    from .identify.fit import prepare
 
     if likelihood not in LIKELIHOODS:
         raise ValueError(f"likelihood must be one of {LIKELIHOODS}, got {likelihood!r}")
@@ -148,7 +148,7 @@ def coverage(case: Case, structure: str | dict, n: int = 60, likelihood: str = "
              level: float = 0.9) -> pd.DataFrame:
     """Intervals of ``n`` datasets (seeds ``seed0 .. seed0 + n - 1``), one row per dataset and parameter, with
     ``covers_truth``, ``covers_limit``."""
-    from .structures import make_structure
+    from .identify.structures import make_structure
 
     st = make_structure(structure)
     rows = []

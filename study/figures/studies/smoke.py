@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 
-from ..figures.plots import (
+from ..plots import (
     NOISE_ORDER, STRUCTURE_ORDER, _order, Builder, _first, drift_heatmaps, fit_time_figure, collinearity_tables,
     vif_table, correlation_figure, validation_figure, rmse_cc_table, lcurve_figure, convergence_figure, emcee_figures,
     estimator_style, sampling_label,

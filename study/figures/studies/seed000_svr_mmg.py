@@ -8,12 +8,12 @@ from __future__ import annotations
 import pandas as pd
 from scipy import stats
 
-from ..figures.plots import (
+from ..plots import (
     EQ_ORDER, STRUCTURE_ORDER, NOISE_ORDER, _order, Builder, _first, drift_heatmaps, fit_time_figure,
     collinearity_tables, vif_table, correlation_figure, validation_figure, rmse_cc_table, finest, sampling_label,
     structure_style,
 )
-from ..figures.verdicts import compare, explain, sensitivity, settle, summary
+from ..verdicts import compare, explain, sensitivity, settle, summary
 
 NAME = "seed000_svr_mmg"
 SEED = "000"  # the seed paper whose claim it tests: a "not run" row in CLAIMS.md until it has run

@@ -1,16 +1,18 @@
-"""The contract every candidate effect of the model doctor follows (discovered from ``conf/effect/*.yaml``).
+"""The contract every candidate effect follows (discovered from ``conf/effect/*.yaml``): what identification with
+effects adds to a model, and the model doctor's candidates.
 
 An effect is one class (normally one module in this package, or anywhere importable) and one YAML::
 
     name: yaw_bias
-    _target_: study.doctor.effects.yaw_bias.YawBias
+    _target_: study.identify.effects.yaw_bias.YawBias
     params: []            # its nonlinear parameters (outer search): name, unit, lo, hi, grid, scale
     options: {}           # passed to the class
     example: {...}        # a hidden-effect case the generated tests run (tests/test_doctor_effects.py)
 
-The doctor identifies a model by equation error with variable projection (``study.doctor.fit``): for given
-values of the effects' nonlinear parameters the regression rows are built and every linear unknown (free
-model coefficients and the effects' linear parameters) follows by least squares. An effect says, through the
+A model is identified with effects by equation error with variable projection
+(``study.identify.with_effects``): for given values of the effects' nonlinear parameters the regression rows are
+built and every linear unknown (free model coefficients and the effects' linear parameters) follows by least
+squares. An effect says, through the
 hooks below, what it estimates and how it enters
 
 - the **rows** ``M (a_measured - a_known) = sum_i theta_i phi_i`` (forces, per equation X, Y, N): it may change
@@ -23,9 +25,9 @@ hooks below, what it estimates and how it enters
   the replay's initial state (``initial_state``), and whether the record's rudder is a command
   (``rudder_is_command``).
 
-Every hook gets the :class:`study.doctor.fit.DoctorProblem` (vessel, scale, records), the parameter ``values``
-(nonlinear parameters, the chosen variant, and in the replay also the linear unknowns) and, where it depends
-on the record, a :class:`RecordInfo` (its data, its water depth). Forces are in N (N m for yaw), body axes,
+Every hook gets the :class:`study.identify.with_effects.EffectsProblem` (vessel, scale, records), the parameter
+``values`` (nonlinear parameters, the chosen variant, and in the replay also the linear unknowns) and, where it
+depends on the record, a :class:`RecordInfo` (its data, its water depth). Forces are in N (N m for yaw), body axes,
 each an ``(n, 3)`` array of X, Y, N at the structure's nodes.
 """
 from __future__ import annotations

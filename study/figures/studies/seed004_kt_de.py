@@ -8,11 +8,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from ..figures.plots import (
+from ..plots import (
     PRINT_WIDTH_IN, _plt, _wrap, Builder, _first, finest, fit_time_figure, log_ticks, sampling_label, structure_style,
     validation_figure,
 )
-from ..figures.verdicts import compare, describe, explain, sensitivity, summary
+from ..verdicts import compare, describe, explain, sensitivity, summary
 
 NAME = "seed004_kt_de"
 SEED = "004"  # the seed paper whose claim it tests: a "not run" row in CLAIMS.md until it has run

@@ -1,8 +1,10 @@
-"""Identify a model with a set of effects, and replay it through records.
+"""Identify a model with a set of effects, and replay it through records: the identification the model doctor
+(``study.doctor``) ranks effects with and a study run with ``model.effects`` (``study.pipeline``,
+``study.records_run``) uses.
 
 The model is a vessel kind's force model: the vessel config holds the coefficients as the user knows them
 (captive tests, CFD, a previous identification); the model config may free some of them (``equations``, each
-coefficient under the equation its config declares) and drop some (``omit``); effects (``study.doctor.effects``,
+coefficient under the equation its config declares) and drop some (``omit``); effects (``study.identify.effects``,
 discovered from ``conf/effect``) add their physics through their hooks. Identification is by equation error
 with variable projection (Golub & Pereyra 1973): for given values of the effects' nonlinear parameters the
 rows are built and every linear unknown (free coefficients, the effects' linear parameters) follows by one
@@ -22,9 +24,9 @@ import numpy as np
 import pandas as pd
 from scipy import linalg, optimize
 
-from ..identify.output_error import initial_value
-from ..identify.regression import kind_regressors
-from ..identify.structures import Segment, make_structure, segments
+from .output_error import initial_value
+from .regression import kind_regressors
+from .structures import Segment, make_structure, segments
 from ..sim import load_vessel, replay
 from .effects import RecordInfo, describe_values, list_effects, registry
 
@@ -75,7 +77,7 @@ class Fit:
         return {**self.outer, **self.coefs}
 
 
-class DoctorProblem:
+class EffectsProblem:
     """Records and a model, ready to be identified with any set of effects.
 
     Parameters
@@ -99,8 +101,8 @@ class DoctorProblem:
         self.vessel_cfg = vessel_cfg
         self.base = load_vessel(vessel_cfg)
         if model_cfg.get("type", "kind") != "kind":
-            raise ValueError(f"the doctor works with force models (type: kind); model '{model_cfg.get('name')}' "
-                             f"is of type '{model_cfg.get('type')}'")
+            raise ValueError(f"identification with effects works with force models (type: kind); model "
+                             f"'{model_cfg.get('name')}' is of type '{model_cfg.get('type')}'")
         if model_cfg.get("kind") and model_cfg["kind"] != self.base.kind_name:
             raise ValueError(f"model '{model_cfg.get('name')}' is for vessel kind '{model_cfg['kind']}', but vessel "
                              f"'{self.base.name}' is of kind '{self.base.kind_name}'")
@@ -126,7 +128,7 @@ class DoctorProblem:
             structure = {"name": "smoothed", "smoothing": {"window_s": 0.2 * T, "polyorder": 3}}
         self.structure = make_structure(structure) if not hasattr(structure, "ops") else structure
         if self.structure.simulates:
-            raise ValueError("the doctor identifies by equation error: choose a regression structure")
+            raise ValueError("identification with effects is by equation error: choose a regression structure")
         p = vessel_cfg["particulars"]
         self.L, self.U0, self.draft = float(p["Lpp"]), self.base.U0, float(p["d"])
         self.records = [as_frame(r) for r in records]
@@ -651,7 +653,7 @@ class DoctorProblem:
                              "y0": out[:, 4], "psi": out[:, 5], "delta": out[:, 6]})
 
 
-#: the local search's evaluations when an effect's variants are screened (see ``DoctorProblem.fit``)
+#: the local search's evaluations when an effect's variants are screened (see ``EffectsProblem.fit``)
 SCREEN_EVALS = 25
 
 
@@ -712,7 +714,7 @@ def diverged_records(errors: dict) -> list:
     return [r for r, e in errors.items() if e.get("diverged")]
 
 
-def residuals(problem: DoctorProblem, fit: Fit, names: list) -> list:
+def residuals(problem: EffectsProblem, fit: Fit, names: list) -> list:
     """Inverse dynamics of the fitted model on the training records: per segment the times, the residual
     forces [N, N, N m] (measured inertial forces minus the model's) and the states and inputs at the rows."""
     out, seen = [], set()
@@ -741,7 +743,7 @@ def identify_in_study(base, model_cfg: dict, records, structure_cfg, truth) -> d
     the effects' parameters, with the truth from the truth vessel), ``metrics`` and ``vessel`` (the identified
     model with its own steering gear, for closed-loop validation)."""
     effects = tuple(model_cfg.get("effects") or [])
-    pb = DoctorProblem(base.cfg, model_cfg, records, structure_cfg)
+    pb = EffectsProblem(base.cfg, model_cfg, records, structure_cfg)
     fit = pb.fit(effects, refine=True)
     env = dict(zip(truth.param_names, truth.params))
     q = pb.scale

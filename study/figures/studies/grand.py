@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import pandas as pd
 
-from ..figures.plots import (
+from ..plots import (
     ESTIMATOR_ORDER, STRUCTURE_ORDER, NOISE_ORDER, PRINT_WIDTH_IN, _plt, _order, _wrap, Builder, _hT,
     estimator_style, fit_time_figure, collinearity_tables, log_ticks, sampling_label, finest,
 )
-from ..figures.verdicts import compare, explain, sensitivity, summary
+from ..verdicts import compare, explain, sensitivity, summary
 
 NAME = "grand"
 SEED = None  # no seed paper's claim

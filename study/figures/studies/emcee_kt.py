@@ -18,8 +18,8 @@ import math
 import pandas as pd
 from scipy import stats
 
-from ..figures.plots import Builder, _first, _order, emcee_figures, NOISE_ORDER, STRUCTURE_ORDER
-from ..figures.verdicts import ALPHA, settle
+from ..plots import Builder, _first, _order, emcee_figures, NOISE_ORDER, STRUCTURE_ORDER
+from ..verdicts import ALPHA, settle
 
 NAME = "emcee_kt"
 SEED = None  # no seed paper's claim

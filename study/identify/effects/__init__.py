@@ -1,4 +1,5 @@
-"""The model doctor's candidate effects, discovered from ``conf/effect/*.yaml`` (nothing here lists them).
+"""Candidate physical effects, discovered from ``conf/effect/*.yaml`` (nothing here lists them): what
+identification with effects (``study.identify.with_effects``) adds to a model, and the model doctor's candidates.
 
 An effect config names its class (``_target_``), its nonlinear parameters and options; the contract is in
 :mod:`.base`. Adding an effect is one class plus one YAML, like an estimator. A user adds their own without
@@ -22,7 +23,7 @@ __all__ = ["Effect", "Param", "RecordInfo", "effect_dirs", "list_effects", "make
 def effect_dirs(extra=()) -> list:
     """The folders effect YAMLs are read from: the package's ``conf/effect``, then ``STUDY_EFFECT_PATH``, then
     ``extra`` (a later folder's YAML of the same name replaces an earlier one)."""
-    from ...sim import CONF_DIR
+    from ...config import CONF_DIR
 
     dirs = [CONF_DIR / "effect"]
     env = os.environ.get("STUDY_EFFECT_PATH", "")
@@ -77,7 +78,7 @@ def make_effect(cfg, extra=()) -> Effect:
     except Exception as e:  # hydra wraps import errors in its own type
         raise ValueError(f"{where}: cannot import _target_ '{target}': {e}") from e
     if not (isinstance(cls, type) and issubclass(cls, Effect)):
-        raise ValueError(f"{where}: {target} is not a subclass of study.doctor.effects.Effect")
+        raise ValueError(f"{where}: {target} is not a subclass of study.identify.effects.Effect")
     try:
         eff = cls(cfg["name"], cfg.get("params"), **dict(cfg.get("options") or {}))
     except TypeError as e:

@@ -1,5 +1,5 @@
 """Plausibility checks of records against the vessel, run on every training and validation record before the
-model doctor fits anything.
+model doctor or a run on files (``study.records_run``) fits anything.
 
 The schema (``study.schema.validate``) checks what a record can say about itself (columns, NaN, time, degrees
 for radians). What needs the vessel is checked here:
@@ -128,7 +128,7 @@ def vessel_facts(vessel_cfg) -> VesselFacts:
     key = _key(cfg)
     if key in _FACTS:
         return _FACTS[key]
-    from ..sim import load_vessel, simulate
+    from .sim import load_vessel, simulate
 
     vessel = load_vessel(cfg)
     L, U0 = vessel.L, vessel.U0
@@ -160,7 +160,7 @@ def _other_configs() -> list:
     """(name, kind, Lpp, U0, hull key) of every vessel config in conf/vessel/ (read once)."""
     global _CONFIGS
     if _CONFIGS is None:
-        from ..sim import list_configs, read_config
+        from .config import list_configs, read_config
 
         out = []
         for name in list_configs("vessel"):

@@ -8,11 +8,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from ..figures.plots import (
+from ..plots import (
     ESTIMATOR_ORDER, NOISE_ORDER, PRINT_WIDTH_IN, TRUTH_STYLE, _plt, _order, _wrap, Builder, _hT, _first, at_sampling,
     estimator_style, fit_time_figure, lcurve_figure, log_ticks, sampling_label,
 )
-from ..figures.verdicts import explain, sensitivity, summary
+from ..verdicts import explain, sensitivity, summary
 
 NAME = "seed001_shallow_water"
 SEED = "001"  # the seed paper whose claim it tests: a "not run" row in CLAIMS.md until it has run

@@ -9,7 +9,7 @@ import numpy as np
 
 import pandas as pd
 
-from ..figures.plots import (
+from ..plots import (
     STRUCTURE_ORDER, NOISE_ORDER, _order, Builder, _first, at_sampling, drift_heatmaps, fit_time_figure,
     collinearity_tables, convergence_figure, sampling_label,
 )

@@ -26,6 +26,20 @@ from .structures import segments
 STATE = ("u", "v", "r", "x0", "y0", "psi")
 #: cost of a simulation that diverged (NaN/inf): worse than any finite one, but finite for the optimisers
 DIVERGED = 1e12
+#: a batch of at least twice this many members is simulated as two halves in two threads (a half of 8 or more
+#: still fills the integrator's SIMD member loop: study.sim.core._SIMD_MIN_BATCH)
+SPLIT_MIN = 8
+_POOL = None
+
+
+def _pool():
+    """Two worker threads, made on first use (a batch is split in two whatever the number of cores)."""
+    global _POOL
+    if _POOL is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _POOL = ThreadPoolExecutor(max_workers=2, thread_name_prefix="output-error")
+    return _POOL
 
 
 class OutputErrorProblem:
@@ -107,6 +121,7 @@ class OutputErrorProblem:
         self.bounds = None if bounds is None else np.vstack([np.asarray(bounds, float).reshape(-1, 2),
                                                              np.asarray(init_b).reshape(-1, 2)])
         self.n_sim = 0  # simulations run (each batch member counts once)
+        self.threads = True  # split large batches over two threads (see simulate)
 
     @property
     def k(self) -> int:
@@ -118,10 +133,24 @@ class OutputErrorProblem:
 
     def simulate(self, theta) -> list:
         """Predicted outputs per segment, each (n_i, n_outputs, B), for parameter sets ``theta`` (k, B): the
-        model's parameters, then the estimated initial states."""
+        model's parameters, then the estimated initial states.
+
+        A batch of at least ``2 * SPLIT_MIN`` members is simulated as two halves in two threads (the compiled
+        integrator releases the GIL), so both cores work; the split depends on the batch size only, never on
+        the number of cores, so results are the same on any machine (each half runs the vectorised member loop;
+        ``tests/test_speed_paths.py`` checks a split batch against one call)."""
         theta = np.asarray(theta, float)
         if theta.ndim == 1:
             theta = theta[:, None]
+        B = theta.shape[1]
+        self.n_sim += B
+        if B >= 2 * SPLIT_MIN and self.threads:
+            h = B // 2
+            parts = list(_pool().map(self._simulate, (theta[:, :h], theta[:, h:])))
+            return [np.concatenate([a, b], axis=2) for a, b in zip(*parts)]
+        return self._simulate(theta)
+
+    def _simulate(self, theta) -> list:
         B = theta.shape[1]
         P = self.model.oe_pack(theta[:self.k_model])
         out = []
@@ -132,7 +161,6 @@ class OutputErrorProblem:
                     y0[row] = theta[self.k_model + j]
             sim = replay(self.vessel, s["t"], s["delta"], s["n"], y0, P=P, substeps=self.substeps)
             out.append(sim[:, self._col, :])
-        self.n_sim += theta.shape[1]
         return out
 
     def sse(self, theta) -> np.ndarray:
@@ -154,11 +182,13 @@ class OutputErrorProblem:
         c = np.where(np.isfinite(c), c, DIVERGED)
         return float(c[0]) if single else c
 
-    def residuals(self, theta) -> np.ndarray:
-        """Normalised residuals stacked over segments and channels, (N_total * n_outputs, B)."""
+    def residuals(self, theta, scale=None) -> np.ndarray:
+        """Normalised residuals stacked over segments and channels, (N_total * n_outputs, B); each channel
+        divided by its spread, or by ``scale`` (n_outputs,) when given."""
         preds = self.simulate(theta)
+        sc = self.scale if scale is None else np.asarray(scale, float)
         with np.errstate(over="ignore", invalid="ignore"):
-            parts = [((p - s["Y"][:, :, None]) / self.scale[None, :, None]).reshape(-1, p.shape[2])
+            parts = [((p - s["Y"][:, :, None]) / sc[None, :, None]).reshape(-1, p.shape[2])
                      for s, p in zip(self.segments, preds)]
         r = np.concatenate(parts, axis=0)
         return np.where(np.isfinite(r), r, math.sqrt(DIVERGED))
@@ -246,12 +276,14 @@ def make_problem(model, structure, records, seed: int = 0) -> OutputErrorProblem
                               initial_state=cfg.get("initial_state", "estimate"))
 
 
-def local_fit(problem: OutputErrorProblem, x0, max_nfev: int = 200):
+def local_fit(problem: OutputErrorProblem, x0, max_nfev: int = 200, scale=None):
     """Bounded Gauss-Newton (scipy's trust-region-reflective ``least_squares``) on the normalised residuals,
-    the Jacobian by forward differences of all k parameters in ONE batch simulation.
+    the Jacobian by forward differences of all k parameters in ONE batch simulation. ``scale``: the channels'
+    divisors of the residuals (default their spreads; emcee's Laplace approximation passes the noise scales).
 
     Returns ``scipy.optimize.OptimizeResult`` with ``x``, ``fun`` (the cost), ``success``, ``nfev`` and
-    ``cov`` (Gauss-Newton covariance of x for unit residual variance; None if singular).
+    ``cov`` (Gauss-Newton covariance of x for unit residual variance; None if singular) and ``jac`` (the
+    Jacobian of the normalised residuals at x, rows as in :meth:`OutputErrorProblem.residuals`).
     """
     from scipy.optimize import OptimizeResult, least_squares
 
@@ -263,13 +295,13 @@ def local_fit(problem: OutputErrorProblem, x0, max_nfev: int = 200):
     steps = 1e-6 * np.maximum(np.abs(x0), 1e-3 * span)
 
     def fun(x):
-        return problem.residuals(x[:, None])[:, 0]
+        return problem.residuals(x[:, None], scale)[:, 0]
 
     def jac(x, f0=None):
         X = np.repeat(x[:, None], problem.k + 1, axis=1)
         h = np.where(x + steps <= hi, steps, -steps)  # stay inside the box
         X[np.arange(problem.k), np.arange(1, problem.k + 1)] += h
-        R = problem.residuals(X)
+        R = problem.residuals(X, scale)
         return (R[:, 1:] - R[:, :1]) / h
 
     res = least_squares(fun, x0, jac=jac, bounds=(lo, hi), x_scale="jac", max_nfev=max_nfev, method="trf")
@@ -280,4 +312,4 @@ def local_fit(problem: OutputErrorProblem, x0, max_nfev: int = 200):
     except np.linalg.LinAlgError:
         pass
     return OptimizeResult(x=res.x, fun=float(problem.cost(res.x)), success=bool(res.success), nfev=res.nfev,
-                          message=res.message, cov=cov)
+                          message=res.message, cov=cov, jac=res.jac)

@@ -493,7 +493,8 @@ def make_integrator(accel, n_kind_params, kinematic_sway: bool = True):
     fp = _fingerprint(accel, n_kind_params, kinematic_sway)
     run = njit(cache=True, _nrt=False, pipeline_class=_NoAliasCompiler, **JIT_FLAGS)(
         _instantiate(_RUN_TEMPLATE, tag, fp, ACCEL=accel, K0=n_kind_params, KINEMATIC_SWAY=kinematic_sway))
-    integrate = njit(cache=True, **JIT_FLAGS)(
+    # nogil: it touches no Python object, so callers may run batches in threads (output error on both cores)
+    integrate = njit(cache=True, nogil=True, **JIT_FLAGS)(
         _instantiate(_INTEGRATE_TEMPLATE, tag, fp, _RUN=run, K0=n_kind_params))
     integrate.run_loop = run
     integrate.run_loop_asm = lambda: _run_loop_asm(run, n_kind_params)

@@ -4,8 +4,9 @@ Records are copies of real ones (``--source``: a results folder, e.g. one ``benc
 each with its own run id, written into a fresh store of N records for N in ``--sizes``. Timed per N:
 
 * ``write``: one more record written by ``ResultStore.write`` (lock, atomic rename) into the folder of N;
-* ``status scan``: what the sweep's progress line does after every job (``study.app.SweepProgress``: list the
-  folder, read each record's first 256 bytes);
+* ``status scan``: what the sweep's progress line did after every job before issue 13 (list the folder, read
+  each record's first 256 bytes), and ``scan (seen)``: what it does now in a worker that has read the records
+  before (``study.app._folder_counts``: the listing, and only new or changed records read);
 * ``collect``: ``ResultStore.collect()`` (parse every record, build and write both parquet tables), the step run
   at the end of every run and sweep.
 
@@ -25,7 +26,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from study.app import _record_status  # noqa: E402
+from study.app import _folder_counts, _record_status  # noqa: E402
 from study.results import ResultStore, run_id  # noqa: E402
 
 
@@ -50,7 +51,7 @@ def main(argv=None):
     size = sum(p.stat().st_size for p in src) / len(src)
     out = {"record_kb": size / 1024, "sizes": {}}
     print(f"{len(sources)} source records, mean {size / 1024:.1f} kB")
-    print(f"{'records':>9}{'write one':>12}{'status scan':>13}{'collect':>10}{'per record':>12}")
+    print(f"{'records':>9}{'write one':>12}{'status scan':>13}{'scan (seen)':>13}{'collect':>10}{'per record':>12}")
     for n in [int(s) for s in args.sizes.split(",")]:
         with tempfile.TemporaryDirectory() as tmp:
             store = ResultStore(Path(tmp))
@@ -66,13 +67,18 @@ def main(argv=None):
                 st = _record_status(f)
                 counts[st] = counts.get(st, 0) + 1
             t_scan = time.perf_counter() - t0
+            _folder_counts(store.root / "records")  # a worker's first job reads every record once
+            t0 = time.perf_counter()
+            assert sum(_folder_counts(store.root / "records").values()) == n + 1
+            t_scan_seen = time.perf_counter() - t0
             t0 = time.perf_counter()
             runs, _ = store.collect()
             t_collect = time.perf_counter() - t0
             assert len(runs) == n + 1
-            out["sizes"][n] = {"write_s": t_write, "scan_s": t_scan, "collect_s": t_collect}
-            print(f"{n:>9}{t_write * 1e3:>10.1f}ms{t_scan:>12.2f}s{t_collect:>9.1f}s{t_collect / n * 1e3:>10.2f}ms",
-                  flush=True)
+            out["sizes"][n] = {"write_s": t_write, "scan_s": t_scan, "scan_seen_s": t_scan_seen,
+                               "collect_s": t_collect}
+            print(f"{n:>9}{t_write * 1e3:>10.1f}ms{t_scan:>12.2f}s{t_scan_seen:>12.3f}s{t_collect:>9.1f}s"
+                  f"{t_collect / n * 1e3:>10.2f}ms", flush=True)
             shutil.rmtree(tmp, ignore_errors=True)
     res = ROOT / "benchmarks" / "results" / "bench_store.json"
     res.parent.mkdir(parents=True, exist_ok=True)

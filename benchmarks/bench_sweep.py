@@ -188,6 +188,7 @@ def sample_jobs(study: str, per_estimator: int, seed: int = 0) -> list[str]:
 def time_sample(tree: Path, jobs: list[str], results: Path) -> list[dict]:
     env = _env(tree)
     env["STUDY_RESULTS_DIR"] = str(results)
+    env["STUDY_TREE"] = str(tree)
     script = ROOT / "benchmarks" / "sweep_sample.py"  # this tree's script, the tree's code (PYTHONPATH)
     p = subprocess.run([sys.executable, str(script), str(results), *jobs], cwd=tree, env=env, capture_output=True,
                        text=True)

@@ -3,16 +3,18 @@
 Each job: Hydra composition of its configuration (what the launcher does again in every job), the run itself
 (``run_study``: simulate, measure, regressors, fit, validate, from the record's own timings), and the results
 store's part (run id, provenance, the atomic record and artefacts: ``run_guarded`` minus the run). Prints one JSON
-line per job. Usage: ``python benchmarks/sweep_sample.py RESULTS_DIR 'ov1 ov2 ...' ['ov1 ...' ...]``.
+line per job; ``STUDY_TREE``: the checkout to time (default this one). Usage: ``python benchmarks/sweep_sample.py RESULTS_DIR 'ov1 ov2 ...' ['ov1 ...' ...]``.
 """
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+# the checkout whose code and configs are timed (bench_sweep.py times an older revision with this script)
+ROOT = Path(os.environ.get("STUDY_TREE") or Path(__file__).resolve().parents[1])
 sys.path.insert(0, str(ROOT))
 
 from hydra import compose, initialize_config_dir  # noqa: E402

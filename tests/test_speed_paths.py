@@ -97,3 +97,26 @@ def test_laplace_and_de_moves_agree_on_seed000_output_error():
     dz, ratio, _ = _compare(problem, 1000)
     assert np.all(dz < 0.5), (problem.names, dz)
     assert np.all(np.abs(ratio - 1) < 0.25), (problem.names, ratio)
+
+
+def test_sweep_progress_counts_follow_the_folder(tmp_path):
+    """The progress line's counts read each record once per worker, yet follow new, changed and removed ones."""
+    import json
+    import os
+
+    from study.app import _folder_counts
+
+    def put(name, status, stamp):
+        p = tmp_path / f"{name}.json"
+        p.write_text(json.dumps({"run_id": name, "status": status}))
+        os.utime(p, ns=(stamp, stamp))
+
+    put("a", "ok", 1)
+    put("b", "failed", 1)
+    (tmp_path / "notes.txt").write_text("x")
+    assert _folder_counts(tmp_path) == {"ok": 1, "failed": 1}
+    put("b", "ok", 2)  # a failed run rerun
+    put("c", "skipped", 1)
+    assert _folder_counts(tmp_path) == {"ok": 2, "skipped": 1}
+    (tmp_path / "a.json").unlink()
+    assert _folder_counts(tmp_path) == {"ok": 1, "skipped": 1}

@@ -120,6 +120,7 @@ class EmceeSampler(Estimator):
         sampler.random_state = np.random.RandomState(int(rng.integers(2 ** 31))).get_state()  # reproducible
         state = p0
         steps, tau, ess, converged = 0, np.full(ndim, np.nan), 0.0, False
+        last_adapt = 0  # 'laplace': the step of the proposal's last refit (the burn-in is at least this long)
         bar = None
         if progress:
             from tqdm.auto import tqdm
@@ -130,17 +131,18 @@ class EmceeSampler(Estimator):
                 n = min(self.check_every, self.max_steps - steps)
                 state = sampler.run_mcmc(state, n, progress=False)
                 steps += n
-                if kind == "laplace" and steps == n and 2 * steps <= max(self.min_steps, n):
-                    # adapt once, then freeze: the proposal refitted to the walkers' draws so far (second half),
-                    # which see what the Laplace approximation does not (the prior box, skew); the chain before
-                    # this step lies in the discarded first half (burn-in = steps // 2 >= this step), so the
-                    # kept chain is an ordinary Metropolis-Hastings chain with a fixed proposal
-                    laplace.refit(sampler.get_chain(discard=steps // 2).reshape(-1, ndim))
+                if kind == "laplace" and steps in (self.check_every, 2 * self.check_every):
+                    # adapt twice, then freeze: the proposal refitted to the walkers' draws since the last
+                    # adaptation (second half), which see what the Laplace approximation does not (the prior box,
+                    # skew); the chain up to the last adaptation is burn-in, so the kept chain is an ordinary
+                    # Metropolis-Hastings chain with a fixed proposal
+                    laplace.refit(sampler.get_chain(discard=max(steps // 2, last_adapt)).reshape(-1, ndim))
+                    last_adapt = steps
                 if bar is not None:
                     bar.update(n)
-                if steps < self.min_steps:
+                if steps < self.min_steps or steps <= last_adapt:
                     continue
-                chain = sampler.get_chain(discard=steps // 2)
+                chain = sampler.get_chain(discard=max(steps // 2, last_adapt))
                 tau = emcee.autocorr.integrated_time(chain, quiet=True, tol=0)
                 kept = chain.shape[0]
                 ess = nw * kept / float(np.max(tau))
@@ -152,7 +154,7 @@ class EmceeSampler(Estimator):
         finally:
             if bar is not None:
                 bar.close()
-        burn = steps // 2
+        burn = max(steps // 2, last_adapt)
         chain = sampler.get_chain(discard=burn)  # (kept, nw, ndim)
         logp = sampler.get_log_prob(discard=burn)
         flat = chain.reshape(-1, ndim)

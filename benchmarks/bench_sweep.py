@@ -16,9 +16,10 @@ ratio, so that a loaded machine slows both alike:
   baseline posterior sd, ratio of sd). Target < 120 s.
 * ``sweep`` -- **grand and seed001_shallow_water**: a stratified sample of each study's jobs timed in one
   process, stage by stage (``sweep_sample.py``: Hydra composition, simulate, measure, regressors, fit, validate,
-  the store's record), in the baseline checkout and in this one; the full sweep's core-seconds extrapolated per
-  estimator (mean of the sampled jobs of an estimator x that estimator's jobs in the sweep, skipped jobs
-  counted at their measured cost), divided by the 2 cores; plus the per-process costs measured by ``startup``
+  the store's record), in the baseline checkout and in this one, after one untimed short run per case (compiled
+  code loaded); the full sweep's core-seconds extrapolated per estimator from CPU time (mean of the distinct
+  sampled jobs of an estimator x that estimator's jobs in the sweep, skipped jobs counted at their measured
+  cost), divided by the 2 cores; plus the per-process costs measured by ``startup``
   times the number of worker processes (joblib: one per core, reused; SLURM: one per job). Target for grand:
   < 600 s.
 
@@ -178,40 +179,56 @@ def sample_jobs(study: str, per_estimator: int, seed: int = 0) -> list[str]:
     rng = np.random.default_rng(seed)
     jobs = []
     for est in axes["estimator"]:
-        for _ in range(per_estimator):
-            ov = [f"experiment={study}"] + [f"{k}={vals[rng.integers(len(vals))]}" for k, vals in axes.items()
-                                           if k != "estimator"] + [f"estimator={est}"]
-            jobs.append(" ".join(ov))
+        mine = []
+        while len(mine) < per_estimator:  # distinct jobs (a repeated one would be resumed, not run)
+            job = " ".join([f"experiment={study}"] + [f"{k}={vals[rng.integers(len(vals))]}" for k, vals in
+                                                      axes.items() if k != "estimator"] + [f"estimator={est}"])
+            if job not in mine:
+                mine.append(job)
+        jobs += mine
     return jobs
 
 
-def time_sample(tree: Path, jobs: list[str], results: Path) -> list[dict]:
+def warmup_jobs(study: str) -> list[str]:
+    """One short run per case of the study: loads (or compiles, in a cold checkout) every vessel kind's compiled
+    code before the timed jobs, so that per-process costs are not charged to the first job of each kind (they are
+    counted once per worker process, from ``startup``)."""
+    cases = STUDIES[study]["axes"]["case"].split(",")
+    return [f"experiment=tiny case={c} estimator=ls seed=987654" for c in cases]
+
+
+def time_sample(tree: Path, study: str, jobs: list[str], results: Path) -> list[dict]:
     env = _env(tree)
     env["STUDY_RESULTS_DIR"] = str(results)
     env["STUDY_TREE"] = str(tree)
     script = ROOT / "benchmarks" / "sweep_sample.py"  # this tree's script, the tree's code (PYTHONPATH)
-    p = subprocess.run([sys.executable, str(script), str(results), *jobs], cwd=tree, env=env, capture_output=True,
-                       text=True)
+    warm = warmup_jobs(study)
+    p = subprocess.run([sys.executable, str(script), str(results), *warm, *jobs], cwd=tree, env=env,
+                       capture_output=True, text=True)
     rows = [json.loads(line) for line in p.stdout.splitlines() if line.startswith("{")]
-    if len(rows) != len(jobs):
+    if len(rows) != len(warm) + len(jobs):
         raise RuntimeError(f"sweep sample in {tree} failed: {p.stderr[-2000:]}")
-    return rows
+    return rows[len(warm):]
 
 
 def extrapolate(study: str, rows: list[dict]) -> dict:
-    """Core-seconds of the full sweep from the sample: per estimator, the mean of its sampled jobs (compose +
-    run + store) times its number of jobs in the sweep."""
+    """Core-seconds of the full sweep from the sample: per estimator, the mean CPU time of its sampled jobs
+    (compose + run + store) times its number of jobs in the sweep; the stages likewise (the records' wall timings
+    of each stage scaled by the job's CPU / wall)."""
     n_est = len(STUDIES[study]["axes"]["estimator"].split(","))
     per_est = STUDIES[study]["jobs"] / n_est
     by = collections.defaultdict(list)
     stages = collections.Counter()
+    w = per_est / len(rows) * n_est  # each sampled job stands for this many jobs of the sweep
     for r in rows:
         est = r["job"].rsplit("estimator=", 1)[1]
-        by[est].append(r["compose_s"] + r["guarded_s"])
+        cpu = r["compose_cpu"] + r["guarded_cpu"]  # CPU time: the machine's load does not inflate it
+        by[est].append(cpu)
+        f = r["guarded_cpu"] / r["guarded_s"] if r["guarded_s"] > 0 else 1.0  # the run's stages: wall -> cpu
         for k, v in r["stages"].items():
-            stages[k] += v * per_est / len(rows) * n_est
-        stages["compose"] += r["compose_s"] * per_est / len(rows) * n_est
-        stages["store"] += (r["guarded_s"] - r["run_s"]) * per_est / len(rows) * n_est
+            stages[k] += v * f * w
+        stages["compose"] += r["compose_cpu"] * w
+        stages["store"] += max(r["guarded_s"] - r["run_s"], 0.0) * f * w
     total = sum(np.mean(v) * per_est for v in by.values())
     return {"core_s": float(total), "by_estimator_core_s": {k: float(np.mean(v) * per_est) for k, v in by.items()},
             "by_stage_core_s": dict(stages)}
@@ -223,7 +240,7 @@ def part_sweep(base: Path, per_estimator: int, tmp: Path, startup: dict | None) 
         jobs = sample_jobs(study, per_estimator)
         res = {}
         for name, tree in (("baseline", base), ("new", ROOT)):
-            rows = time_sample(tree, jobs, tmp / f"{study}-{name}")
+            rows = time_sample(tree, study, jobs, tmp / f"{study}-{name}")
             res[name] = {"sample": rows, **extrapolate(study, rows)}
         b, n = res["baseline"], res["new"]
         workers = 2  # joblib on this machine: one per core, reused for every job

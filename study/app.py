@@ -75,12 +75,13 @@ def _record_status(path: Path) -> str | None:
         return None
 
 
-_SEEN: dict = {}  # record file name -> (mtime_ns, size, status): what this worker process has read already
+_SEEN: dict = {}  # record file name -> (inode, status): what this worker process has read already
 
 
 def _folder_counts(root: Path) -> dict:
-    """Runs in the records folder by status. A worker reads only the records it has not seen (or that changed
-    since: a failed run rerun), from the folder's listing: reading every record after every job cost O(records)
+    """Runs in the records folder by status. A worker reads only the records it has not seen (or that were
+    replaced since: a failed run rerun; the store writes a record to a temporary file and renames it), from the
+    folder's listing: reading every record after every job cost O(records)
     file opens per job (2.5 s at 30,000 records; ``benchmarks/bench_store.py``), a joblib worker now reads each
     record once per sweep."""
     counts, names = {}, set()
@@ -90,18 +91,14 @@ def _folder_counts(root: Path) -> dict:
         if not e.name.endswith(".json"):
             continue
         names.add(e.name)
-        try:
-            st = e.stat()
-        except OSError:
-            continue
-        key = (st.st_mtime_ns, st.st_size)
+        key = e.inode()  # from the listing itself (no stat); a rewritten record is a new file (atomic rename)
         seen = _SEEN.get(e.name)
-        if seen is None or seen[:2] != key:
+        if seen is None or seen[0] != key:
             status = _record_status(Path(e.path))
             if status is None:
                 continue
-            seen = _SEEN[e.name] = (*key, status)
-        counts[seen[2]] = counts.get(seen[2], 0) + 1
+            seen = _SEEN[e.name] = (key, status)
+        counts[seen[1]] = counts.get(seen[1], 0) + 1
     for gone in set(_SEEN) - names:
         del _SEEN[gone]
     return counts

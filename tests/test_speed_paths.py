@@ -106,17 +106,17 @@ def test_sweep_progress_counts_follow_the_folder(tmp_path):
 
     from study.app import _folder_counts
 
-    def put(name, status, stamp):
-        p = tmp_path / f"{name}.json"
-        p.write_text(json.dumps({"run_id": name, "status": status}))
-        os.utime(p, ns=(stamp, stamp))
+    def put(name, status):  # as the store writes: a temporary file renamed over the record
+        tmp = tmp_path / f".{name}.tmp"
+        tmp.write_text(json.dumps({"run_id": name, "status": status}))
+        os.replace(tmp, tmp_path / f"{name}.json")
 
-    put("a", "ok", 1)
-    put("b", "failed", 1)
+    put("a", "ok")
+    put("b", "failed")
     (tmp_path / "notes.txt").write_text("x")
     assert _folder_counts(tmp_path) == {"ok": 1, "failed": 1}
-    put("b", "ok", 2)  # a failed run rerun
-    put("c", "skipped", 1)
+    put("b", "ok")  # a failed run rerun
+    put("c", "skipped")
     assert _folder_counts(tmp_path) == {"ok": 2, "skipped": 1}
     (tmp_path / "a.json").unlink()
     assert _folder_counts(tmp_path) == {"ok": 1, "skipped": 1}

@@ -19,8 +19,9 @@ ratio, so that a loaded machine slows both alike:
   the store's record), in the baseline checkout and in this one, after one untimed short run per case (compiled
   code loaded); the full sweep's core-seconds extrapolated per estimator from CPU time (mean of the distinct
   sampled jobs of an estimator x that estimator's jobs in the sweep, skipped jobs counted at their measured
-  cost), divided by the 2 cores; plus the per-process costs measured by ``startup``
-  times the number of worker processes (joblib: one per core, reused; SLURM: one per job). Target for grand:
+  cost), plus the CPU per job that Hydra's joblib launcher adds (measured on 24 short jobs run as a real sweep
+  and in one process) and the per-process cost measured by ``startup`` for each of the two workers (joblib
+  reuses them), divided by the 2 cores: the wall time of the sweep on an idle 2-core machine. Target for grand:
   < 600 s.
 
 ``python benchmarks/bench_sweep.py [--part startup,emcee,sweep] [--baseline-rev REV] [--sample N]``; figures
@@ -234,8 +235,48 @@ def extrapolate(study: str, rows: list[dict]) -> dict:
             "by_stage_core_s": dict(stages)}
 
 
+LAUNCHER_JOBS = ("experiment=grand case=kvlcc2_mmg,kcs_mmg depth=deep,h_T_2p9 noise=low,medium "
+                 "structure=euler,central,integral estimator=ls")
+
+
+def part_launcher(tree: Path, tmp: Path) -> dict:
+    """CPU per job that Hydra's joblib launcher adds to a job run in-process: the same 24 short jobs as a real
+    sweep (``-m ... hydra/launcher=local``; CPU of the whole process tree) and in one process
+    (``sweep_sample.py``), the difference less one process start, per job."""
+    import resource
+
+    env = _env(tree)
+    env["STUDY_RESULTS_DIR"] = str(tmp / "launcher-real")
+    env["STUDY_TREE"] = str(tree)
+    axes = dict(kv.split("=", 1) for kv in LAUNCHER_JOBS.split())
+    jobs = [" ".join(f"{k}={v}" for k, v in zip(axes, combo))
+            for combo in itertools.product(*[v.split(",") for v in axes.values()])]
+
+    def children_cpu():
+        r = resource.getrusage(resource.RUSAGE_CHILDREN)
+        return r.ru_utime + r.ru_stime
+
+    c0, t0 = children_cpu(), time.perf_counter()
+    subprocess.run([sys.executable, "-m", "study", "-m", *LAUNCHER_JOBS.split(), "hydra/launcher=local",
+                    f"hydra.sweep.dir={tmp / 'multirun'}"], cwd=tree, env=env, check=True, capture_output=True)
+    real_cpu, real_wall = children_cpu() - c0, time.perf_counter() - t0
+    env["STUDY_RESULTS_DIR"] = str(tmp / "launcher-inproc")
+    c0 = children_cpu()
+    subprocess.run([sys.executable, str(ROOT / "benchmarks" / "sweep_sample.py"), str(tmp / "launcher-inproc"),
+                    *jobs], cwd=tree, env=env, check=True, capture_output=True)
+    inproc_cpu = children_cpu() - c0
+    return {"jobs": len(jobs), "real_cpu": real_cpu, "real_wall": real_wall, "inproc_cpu": inproc_cpu}
+
+
 def part_sweep(base: Path, per_estimator: int, tmp: Path, startup: dict | None) -> dict:
-    out = {}
+    out = {"launcher": {}}
+    for name, tree in (("baseline", base), ("new", ROOT)):
+        la = part_launcher(tree, tmp / f"launcher-{name}")
+        ready = (startup or {}).get(name, {}).get("ready_cpu", 0.0)
+        la["per_job_cpu"] = max(la["real_cpu"] - la["inproc_cpu"] - ready, 0.0) / la["jobs"]
+        out["launcher"][name] = la
+        print(f"launcher ({name}): {la['jobs']} short jobs as a sweep {la['real_cpu']:.1f} s of CPU, in one process "
+              f"{la['inproc_cpu']:.1f} s: {la['per_job_cpu']:.2f} s of CPU per job added by the launcher", flush=True)
     for study in STUDIES:
         jobs = sample_jobs(study, per_estimator)
         res = {}
@@ -246,14 +287,16 @@ def part_sweep(base: Path, per_estimator: int, tmp: Path, startup: dict | None) 
         workers = 2  # joblib on this machine: one per core, reused for every job
         for name in ("baseline", "new"):
             per_proc = (startup or {}).get(name, {}).get("ready_cpu", 0.0)
-            res[name]["wall_estimate_s"] = (res[name]["core_s"] + workers * per_proc) / 2.0
+            launch = out["launcher"][name]["per_job_cpu"] * STUDIES[study]["jobs"]
+            res[name]["launcher_core_s"] = launch
+            res[name]["wall_estimate_s"] = (res[name]["core_s"] + launch + workers * per_proc) / 2.0
         res["ratio"] = n["wall_estimate_s"] / b["wall_estimate_s"]
         print(f"\n{study}: {len(jobs)} sampled jobs ({per_estimator} per estimator), extrapolated to "
               f"{STUDIES[study]['jobs']} jobs on 2 cores")
-        print(f"{'':10}{'wall':>9}  " + "  ".join(f"{k}" for k in sorted(n["by_stage_core_s"])))
+        print(f"{'':10}{'wall':>9}  launcher  " + "  ".join(f"{k}" for k in sorted(n["by_stage_core_s"])))
         for name in ("baseline", "new"):
             r = res[name]
-            print(f"{name:10}{r['wall_estimate_s']:>8.0f}s  " + "  ".join(
+            print(f"{name:10}{r['wall_estimate_s']:>8.0f}s  {r['launcher_core_s'] / 2:>8.0f}  " + "  ".join(
                 f"{r['by_stage_core_s'].get(k, 0) / 2:.0f}" for k in sorted(n["by_stage_core_s"])) + "  (s of wall)")
         print("by estimator (new, s of wall): " + ", ".join(
             f"{k} {v / 2:.0f}" for k, v in sorted(n["by_estimator_core_s"].items(), key=lambda kv: -kv[1])))

@@ -6,12 +6,13 @@ where a faster sampler draws from the same posterior.
 - emcee's 'laplace' moves (an independence proposal from the Laplace approximation, ``bayes.LaplaceProposal``)
   are exact Metropolis-Hastings: where the target is the proposal itself every proposal is accepted (a wrong
   sign or a missing term in the Hastings ratio would reject some), and draws stay inside the prior box.
-- The posterior by 'laplace' moves agrees with the one by today's DE moves on an output-error problem: medians
-  within 0.5 posterior sd and sds within 25 % on the exact KT model (fast), and on seed 000's 11 coefficients +
-  3 initial states (slow). Tolerances: each chain has >= 1,000 effective samples (300 for the fast test), so the
-  Monte Carlo sd of a median is about 1.25 / sqrt(ESS) posterior sd (0.04; 0.07) and of an sd 1 / sqrt(2 ESS)
-  (2 %; 4 %); the difference of two chains is sqrt(2) larger: the bounds are about 5 such sds at ESS 300 and
-  more at 1,000, allowing for the stopping rule's ESS being an estimate (short chains underestimate tau).
+- The posterior by 'laplace' moves is the posterior: its chain's means and sds agree with self-normalised
+  importance sampling from the same (frozen) proposal -- independent draws, no chain to mix -- on the exact KT
+  model (fast) and on seed 000's 11 coefficients + 3 initial states (slow). Tolerances: a chain of ESS effective
+  samples has a Monte Carlo sd of its mean of 1 / sqrt(ESS) posterior sd and of its sd about 1 / sqrt(2 ESS);
+  importance sampling with an effective size above 300 adds as much again. At ESS 300 (fast) that is 0.06-0.08
+  sd and 4-6 %, at 1,000 (slow) 0.03-0.05 sd and 2-3 %: the bounds (0.4 sd and 20 %; 0.25 sd and 12 %) are about
+  five of them, allowing for the stopping rule's ESS being an estimate.
 """
 from __future__ import annotations
 
@@ -68,35 +69,53 @@ def test_laplace_moves_need_the_output_error_likelihood():
         make_estimator("emcee", moves="laplace").fit(X, X @ [1.0, 2.0])
 
 
-def _compare(problem, target_ess):
-    fits = {m: make_estimator("emcee", moves=m, target_ess=target_ess).fit_output_error(problem)
-            for m in ("de", "laplace")}
-    de, lp = fits["de"], fits["laplace"]
-    assert lp.moves_ == "laplace" and de.moves_ == "de"
-    assert lp.diagnostics_["ess"] >= target_ess and lp.diagnostics_["converged"] == 1.0
-    dz = np.abs(lp.coef_ - de.coef_) / de.coef_std_
-    ratio = lp.coef_std_ / de.coef_std_
-    return dz, ratio, fits
+def _importance_moments(problem, proposal, n=6000, seed=3):
+    """Posterior mean and sd of the model parameters by self-normalised importance sampling from ``proposal``:
+    independent draws, so no Markov chain has to mix -- the reference the chains are checked against."""
+    k, nobs = problem.k, problem.n_obs.astype(float)
+    x = proposal.draw(n, np.random.RandomState(seed))
+    sse = problem.sse(x[:, :k].T)
+    lp = np.sum(-(nobs[:, None] * x[:, k:].T) - 0.5 * sse / np.exp(2 * x[:, k:].T), axis=0)
+    lw = lp - proposal.log_density(x)
+    w = np.exp(lw - lw.max())
+    w /= w.sum()
+    m = w @ x[:, :k]
+    return m, np.sqrt(w @ (x[:, :k] - m) ** 2), 1.0 / np.sum(w ** 2)
 
 
-def test_laplace_and_de_moves_agree_on_a_kt_posterior(kt_problem):
-    dz, ratio, fits = _compare(kt_problem, 300)
-    assert np.all(dz < 0.5), (kt_problem.names, dz)
-    assert np.all(np.abs(ratio - 1) < 0.25), (kt_problem.names, ratio)
-    assert fits["laplace"].diagnostics_["steps"] < fits["de"].diagnostics_["steps"]
+def _check_against_importance_sampling(problem, target_ess):
+    est = make_estimator("emcee", moves="laplace", target_ess=target_ess).fit_output_error(problem)
+    assert est.moves_ == "laplace" and est.diagnostics_["converged"] == 1.0
+    m, sd, ess_is = _importance_moments(problem, est.proposal_)
+    assert ess_is > 300, ess_is  # the proposal covers the posterior
+    dz = np.abs(est.samples_.mean(axis=0) - m) / sd
+    ratio = est.coef_std_ / sd
+    return est, dz, ratio
+
+
+def test_laplace_moves_sample_the_kt_posterior(kt_problem):
+    """Chain (ESS >= 300) against importance sampling: means within 0.4 sd, sds within 20 %."""
+    est, dz, ratio = _check_against_importance_sampling(kt_problem, 300)
+    assert np.all(dz < 0.4), (kt_problem.names, dz)
+    assert np.all(np.abs(ratio - 1) < 0.2), (kt_problem.names, ratio)
+    de = make_estimator("emcee", moves="de", target_ess=300).fit_output_error(kt_problem)
+    assert est.diagnostics_["steps"] < de.diagnostics_["steps"]
 
 
 @pytest.mark.slow
-def test_laplace_and_de_moves_agree_on_seed000_output_error():
-    """The benchmark's problem (bench_sweep.py) at a 300 s record: 11 coefficients + 3 initial states."""
+def test_laplace_moves_sample_the_seed000_output_error_posterior():
+    """The benchmark's problem (bench_sweep.py) at a 300 s record, 11 coefficients + 3 initial states: chain (ESS
+    >= 1,000) against importance sampling, means within 0.25 sd, sds within 12 %. (Measured along the way: the
+    DE moves' chain, also at ESS >= 1,000, has sds 18-34 % below the importance-sampling ones on this problem:
+    the ensemble had not explored the posterior's width, which its autocorrelation estimate cannot see.)"""
     from study.identify.structures import make_structure as ms
 
     v = load_vessel("usv_waterjet")
     rec = MeasurementModel(noise_level=0.01, seed=0).apply(simulate(v, "seed000_sequence", duration=300.0))
     problem = make_problem(make_model("mmg_simplified", v), ms("output_error"), [rec])
-    dz, ratio, _ = _compare(problem, 1000)
-    assert np.all(dz < 0.5), (problem.names, dz)
-    assert np.all(np.abs(ratio - 1) < 0.25), (problem.names, ratio)
+    est, dz, ratio = _check_against_importance_sampling(problem, 1000)
+    assert np.all(dz < 0.25), (problem.names, dz)
+    assert np.all(np.abs(ratio - 1) < 0.12), (problem.names, ratio)
 
 
 def test_sweep_progress_counts_follow_the_folder(tmp_path):

@@ -162,6 +162,7 @@ class EmceeSampler(Estimator):
         self.samples_all_ = flat[::thin]
         q = (0.5 - self.interval / 2, 0.5 + self.interval / 2)
         self.moves_ = kind
+        self.proposal_ = laplace if kind == "laplace" else None  # the frozen proposal (an importance sampler too)
         self.diagnostics_ = {"acceptance": float(np.mean(sampler.acceptance_fraction)),
                              "tau_max": float(np.max(tau)), "ess": float(ess), "steps": int(steps),
                              "walkers": int(nw), "converged": float(converged)}

@@ -334,6 +334,8 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=5, help="startup: child processes per tree")
     ap.add_argument("--sample", type=int, default=3, help="sweep: sampled jobs per estimator")
     ap.add_argument("--no-baseline-emcee", action="store_true", help="emcee: skip the 6-minute baseline fit")
+    ap.add_argument("--keep-baseline", action="store_true",
+                    help="keep the baseline checkout (and its compiled code) for the next run")
     args = ap.parse_args(argv)
     parts = args.part.split(",")
     out = {"platform": platform.platform(), "cpus": os.cpu_count(), "load_before": os.getloadavg(),
@@ -348,6 +350,8 @@ def main(argv=None):
 
         with tempfile.TemporaryDirectory() as tmp:
             out["sweep"] = part_sweep(base, args.sample, Path(tmp), out.get("startup"))
+    if not args.keep_baseline:  # the temporary worktree is registered in the repository: remove it
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base)], capture_output=True)
     out["load_after"] = os.getloadavg()
     res = ROOT / "benchmarks" / "results" / "bench_sweep.json"
     res.parent.mkdir(parents=True, exist_ok=True)

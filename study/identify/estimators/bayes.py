@@ -111,7 +111,8 @@ class EmceeSampler(Estimator):
             moves = None
         elif kind == "laplace":
             if laplace is None:
-                raise ValueError("emcee: moves 'laplace' needs the output-error likelihood (structure output_error)")
+                raise ValueError("emcee: moves 'laplace' needs the output-error likelihood (structure output_error) "
+                                 "with a nonsingular Gauss-Newton information at the fit; use moves 'de'")
             moves = [(emcee.moves.MHMove(laplace), 0.8), (emcee.moves.DEMove(), 0.16),
                      (emcee.moves.DESnookerMove(), 0.04)]
         else:

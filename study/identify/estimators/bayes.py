@@ -60,12 +60,14 @@ class EmceeSampler(Estimator):
         'de': emcee's differential-evolution moves (DEMove 0.8, DESnookerMove 0.2; ter Braak & Vrugt 2008, as
         emcee's documentation suggests for correlated posteriors): measured 2.5x shorter autocorrelation times
         than the stretch move on a 14-dimensional correlated Gaussian. 'stretch': Goodman & Weare (emcee's
-        default). 'laplace' (output error only): an independence Metropolis-Hastings proposal, a multivariate t
-        (5 degrees of freedom) on the Laplace approximation at the Gauss-Newton optimum (``LaplaceProposal``),
-        0.8 of the steps, with the DE moves 0.2 of them; the posterior of thousands of samples is close to that
-        Gaussian, so a proposal drawn from it is accepted most of the time and each walker forgets its past in
-        a few steps (measured on the benchmark's 17 dimensions: autocorrelation 2-4 steps against about 110
-        with 'de'; ``benchmarks/bench_sweep.py``). 'auto': 'laplace' for output error, 'de' for regression.
+        default). 'laplace' (output error only): an independence Metropolis-Hastings proposal
+        (``LaplaceProposal``: a multivariate t, 5 degrees of freedom, cut by the prior box) 0.8 of the steps, the
+        DE moves 0.2 of them. It starts at the Laplace approximation at the posterior mode and is refitted to the
+        walkers' draws after ``check_every`` and 2 ``check_every`` steps, then frozen (the steps before are
+        burn-in): the Laplace approximation alone is a poor proposal for a long replay (far from linear in the
+        coefficients, cut by the box). Measured on ``benchmarks/bench_sweep.py``'s 17 dimensions: acceptance
+        0.20, autocorrelation 16 steps against 112-120 with 'de', 1,000 steps against 7,250. 'auto': 'laplace'
+        for output error, 'de' for regression.
     init : str
         Output error: where the walkers start. 'local' a Gauss-Newton fit from the problem's initial estimate;
         'de' differential evolution over the box first (global: a KT model's likelihood has distant local
@@ -349,8 +351,8 @@ def _oe_laplace(problem, x0, nobs, max_iter: int = 10):
         np.linalg.cholesky(cov_th)
     except np.linalg.LinAlgError:
         return None
-    centre = x  # the mode in the box (the unconstrained Gauss-Newton centre, far outside where the box binds,
-    # was measured to be accepted less often: 7 % against 12 %)
+    centre = x  # the mode in the box (the unconstrained Gauss-Newton centre, far outside the box where it binds,
+    # was measured to make a worse proposal: accepted 7 % of the time against 12 %)
     k, nc = problem.k, len(nobs)
     cov = np.zeros((k + nc, k + nc))
     cov[:k, :k] = 0.5 * (cov_th + cov_th.T)

@@ -52,6 +52,22 @@ def leaves_envelope(sim: np.ndarray, U0: float, L: float) -> np.ndarray:
     return out
 
 
+#: a batch of at least twice this many members is simulated as two halves in two threads (a half of 8 or more
+#: still fills the integrator's SIMD member loop: study.sim.core._SIMD_MIN_BATCH)
+SPLIT_MIN = 8
+_POOL = None
+
+
+def _pool():
+    """Two worker threads, made on first use (a batch is split in two whatever the number of cores)."""
+    global _POOL
+    if _POOL is None:
+        from concurrent.futures import ThreadPoolExecutor
+
+        _POOL = ThreadPoolExecutor(max_workers=2, thread_name_prefix="output-error")
+    return _POOL
+
+
 class OutputErrorProblem:
     """Replay ``model`` through record segments; ``names``/``bounds``/``x0`` describe the parameters.
 
@@ -134,6 +150,7 @@ class OutputErrorProblem:
         self.n_diverged = 0  # of which left the envelope (see ENVELOPE)
         self.polish_skipped = 0  # local fits stopped because a replay of their Jacobian diverged
         self.last_diverged = np.zeros(0, bool)  # the members of the last batch that diverged
+        self.threads = True  # split large batches over two threads (see simulate)
 
     @property
     def k(self) -> int:
@@ -145,10 +162,33 @@ class OutputErrorProblem:
 
     def simulate(self, theta) -> list:
         """Predicted outputs per segment, each (n_i, n_outputs, B), for parameter sets ``theta`` (k, B): the
-        model's parameters, then the estimated initial states."""
+        model's parameters, then the estimated initial states.
+
+        A batch of at least ``2 * SPLIT_MIN`` members is simulated as two halves in two threads (the compiled
+        integrator releases the GIL), so both cores work; the split depends on the batch size only, never on
+        the number of cores, so results are the same on any machine (each half runs the vectorised member loop;
+        ``tests/test_speed_paths.py`` checks a split batch against one call)."""
         theta = np.asarray(theta, float)
         if theta.ndim == 1:
             theta = theta[:, None]
+        B = theta.shape[1]
+        if B >= 2 * SPLIT_MIN and self.threads:
+            h = B // 2
+            (oa, ga), (ob, gb) = _pool().map(self._simulate, (theta[:, :h], theta[:, h:]))
+            out, gone = [np.concatenate([a, b], axis=2) for a, b in zip(oa, ob)], np.concatenate([ga, gb])
+        else:
+            out, gone = self._simulate(theta)
+        if gone.any():  # a diverged candidate is stopped: none of its outputs count
+            for o in out:
+                o[:, :, gone] = np.nan
+        # the counters are kept here, in the calling thread, not in the halves' threads
+        self.last_diverged = gone
+        self.n_sim += B
+        self.n_diverged += int(gone.sum())
+        return out
+
+    def _simulate(self, theta) -> tuple[list, np.ndarray]:
+        """(outputs per segment, (B,) members that left the envelope) of one batch, without side effects."""
         B = theta.shape[1]
         P = self.model.oe_pack(theta[:self.k_model])
         out = []
@@ -161,13 +201,7 @@ class OutputErrorProblem:
             sim = replay(self.vessel, s["t"], s["delta"], s["n"], y0, P=P, substeps=self.substeps)
             gone |= leaves_envelope(sim, self.vessel.U0, self.vessel.L)
             out.append(sim[:, self._col, :])
-        if gone.any():  # a diverged candidate is stopped: none of its outputs count
-            for o in out:
-                o[:, :, gone] = np.nan
-        self.last_diverged = gone
-        self.n_sim += B
-        self.n_diverged += int(gone.sum())
-        return out
+        return out, gone
 
     def sse(self, theta) -> np.ndarray:
         """Sum of squared output errors per channel, (n_outputs, B), in the channels' own units."""
@@ -188,11 +222,13 @@ class OutputErrorProblem:
         c = np.where(np.isfinite(c), c, DIVERGED)
         return float(c[0]) if single else c
 
-    def residuals(self, theta) -> np.ndarray:
-        """Normalised residuals stacked over segments and channels, (N_total * n_outputs, B)."""
+    def residuals(self, theta, scale=None) -> np.ndarray:
+        """Normalised residuals stacked over segments and channels, (N_total * n_outputs, B); each channel
+        divided by its spread, or by ``scale`` (n_outputs,) when given."""
         preds = self.simulate(theta)
+        sc = self.scale if scale is None else np.asarray(scale, float)
         with np.errstate(over="ignore", invalid="ignore"):
-            parts = [((p - s["Y"][:, :, None]) / self.scale[None, :, None]).reshape(-1, p.shape[2])
+            parts = [((p - s["Y"][:, :, None]) / sc[None, :, None]).reshape(-1, p.shape[2])
                      for s, p in zip(self.segments, preds)]
         r = np.concatenate(parts, axis=0)
         r[:, self.last_diverged] = math.sqrt(DIVERGED)  # one penalty for the whole diverged candidate
@@ -265,14 +301,17 @@ def default_bounds(model, x0: dict | None, cfg: dict) -> np.ndarray:
     return np.array(out)
 
 
-def local_fit(problem: OutputErrorProblem, x0, max_nfev: int = 200):
+def local_fit(problem: OutputErrorProblem, x0, max_nfev: int = 200, scale=None):
     """Bounded Gauss-Newton (scipy's trust-region-reflective ``least_squares``) on the normalised residuals,
-    the Jacobian by forward differences of all k parameters in ONE batch simulation.
+    the Jacobian by forward differences of all k parameters in ONE batch simulation. ``scale``: the channels'
+    divisors of the residuals (default their spreads; emcee's Laplace approximation passes the noise scales).
 
     Returns ``scipy.optimize.OptimizeResult`` with ``x``, ``fun`` (the cost), ``success``, ``nfev`` and
-    ``cov`` (Gauss-Newton covariance of x for unit residual variance; None if singular) and ``skipped``: when a
-    replay the Jacobian needs diverges (or the start itself does), the fit stops and returns the best point it
-    evaluated (``success`` False, ``skipped`` True, the reason in ``message``) instead of failing the run.
+    ``cov`` (Gauss-Newton covariance of x for unit residual variance; None if singular), ``jac`` (the
+    Jacobian of the normalised residuals at x, rows as in :meth:`OutputErrorProblem.residuals`; None when the fit
+    was skipped) and ``skipped``: when a replay the Jacobian needs diverges (or the start itself does), the fit
+    stops and returns the best point it evaluated (``success`` False, ``skipped`` True, the reason in
+    ``message``) instead of failing the run.
     """
     from scipy.optimize import OptimizeResult, least_squares
 
@@ -286,7 +325,7 @@ def local_fit(problem: OutputErrorProblem, x0, max_nfev: int = 200):
     best = {"x": x0, "cost": problem.cost(x0), "nfev": 1}
 
     def fun(x):
-        r = problem.residuals(x[:, None])[:, 0]
+        r = problem.residuals(x[:, None], scale)[:, 0]
         best["nfev"] += 1
         if not problem.last_diverged[0]:
             c = float(np.sum(r * r)) / problem.n_total
@@ -298,7 +337,7 @@ def local_fit(problem: OutputErrorProblem, x0, max_nfev: int = 200):
         X = np.repeat(x[:, None], problem.k + 1, axis=1)
         h = np.where(x + steps <= hi, steps, -steps)  # stay inside the box
         X[np.arange(problem.k), np.arange(1, problem.k + 1)] += h
-        R = problem.residuals(X)
+        R = problem.residuals(X, scale)
         J = (R[:, 1:] - R[:, :1]) / h
         if problem.last_diverged.any() or not np.all(np.isfinite(J)):
             raise _NoJacobian("a replay of the Jacobian diverged")
@@ -311,7 +350,7 @@ def local_fit(problem: OutputErrorProblem, x0, max_nfev: int = 200):
     except _NoJacobian as e:  # divergence is a result: keep the best point, report the skip
         problem.polish_skipped += 1
         x = np.asarray(best["x"], float)
-        return OptimizeResult(x=x, fun=float(problem.cost(x)), success=False, nfev=best["nfev"], cov=None,
+        return OptimizeResult(x=x, fun=float(problem.cost(x)), success=False, nfev=best["nfev"], cov=None, jac=None,
                               message=f"Gauss-Newton polish skipped: {e}", skipped=True)
     cov = None
     try:
@@ -320,7 +359,7 @@ def local_fit(problem: OutputErrorProblem, x0, max_nfev: int = 200):
     except np.linalg.LinAlgError:
         pass
     return OptimizeResult(x=res.x, fun=float(problem.cost(res.x)), success=bool(res.success), nfev=res.nfev,
-                          message=res.message, cov=cov, skipped=False)
+                          message=res.message, cov=cov, jac=res.jac, skipped=False)
 
 
 class _NoJacobian(Exception):

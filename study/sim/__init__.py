@@ -241,28 +241,9 @@ def replay(vessel: Vessel, time: np.ndarray, delta: np.ndarray, n: np.ndarray, s
 
 @lru_cache(maxsize=1)
 def _wind_kernel():
-    from numba import njit
+    from .core import make_wind_kernel
 
-    from .core import _wind_forces
-
-    # not cached on disk: it inlines core._wind_forces, whose changes numba's cache would not notice
-    @njit(cache=False, error_model="numpy")
-    def kernel(u_w, v_w, psi, Vw, wdir, P, k0, out):
-        # one member, the wind speed and direction per sample (the compiled integrator's own force function)
-        Q = P.copy()
-        ccd = math.cos(P[k0 + 1, 0])
-        scd = math.sin(P[k0 + 1, 0])
-        for i in range(u_w.shape[0]):
-            Q[k0 + 2, 0] = Vw[i]
-            cp = math.cos(psi[i])
-            sp = math.sin(psi[i])
-            fx, fy, fn = _wind_forces(u_w[i], v_w[i], cp, sp, Q, k0, 0, ccd, scd, math.cos(wdir[i]),
-                                      math.sin(wdir[i]))
-            out[i, 0] = fx
-            out[i, 1] = fy
-            out[i, 2] = fn
-
-    return kernel
+    return make_wind_kernel()
 
 
 def wind_forces(vessel: Vessel, u_w, v_w, psi, speed, direction) -> np.ndarray:
@@ -281,21 +262,10 @@ def wind_forces(vessel: Vessel, u_w, v_w, psi, speed, direction) -> np.ndarray:
 
 @lru_cache(maxsize=None)
 def _accel_kernel(kind_name: str):
-    from numba import njit
+    from .core import make_accel_kernel
 
-    accel = get_kind(kind_name).accel
-
-    # not cached on disk: a closure over a dispatcher pickles a random id, so the cache would never be hit
-    @njit(cache=False, error_model="numpy")
-    def kernel(u, v, r, d, n, ext, P, out):
-        for b in range(P.shape[1]):
-            for i in range(u.shape[0]):
-                a1, a2, a3 = accel(u[i], v[i], r[i], d[i], n[i], ext[0, b], ext[1, b], ext[2, b], P, b)
-                out[b, i, 0] = a1
-                out[b, i, 1] = a2
-                out[b, i, 2] = a3
-
-    return kernel
+    kind = get_kind(kind_name)
+    return make_accel_kernel(kind.accel, len(kind.PARAM_NAMES), getattr(kind, "KINEMATIC_SWAY", True))
 
 
 def accelerations(vessel: Vessel, P: np.ndarray, u, v, r, delta, n, ext=None) -> np.ndarray:

@@ -493,11 +493,68 @@ def make_integrator(accel, n_kind_params, kinematic_sway: bool = True):
     fp = _fingerprint(accel, n_kind_params, kinematic_sway)
     run = njit(cache=True, _nrt=False, pipeline_class=_NoAliasCompiler, **JIT_FLAGS)(
         _instantiate(_RUN_TEMPLATE, tag, fp, ACCEL=accel, K0=n_kind_params, KINEMATIC_SWAY=kinematic_sway))
-    integrate = njit(cache=True, **JIT_FLAGS)(
+    # nogil: it touches no Python object, so callers may run batches in threads (output error on both cores)
+    integrate = njit(cache=True, nogil=True, **JIT_FLAGS)(
         _instantiate(_INTEGRATE_TEMPLATE, tag, fp, _RUN=run, K0=n_kind_params))
     integrate.run_loop = run
     integrate.run_loop_asm = lambda: _run_loop_asm(run, n_kind_params)
     return integrate
+
+
+def _kernel_templates():
+    """Two small compiled helpers outside the time loop, as templates like the integrator's (same globals and
+    ``fingerprint`` closure, so the same on-disk cache key): the accelerations of a kind at given states (the
+    regressors of every force model, and self-propulsion) and the wind forces. Compiled afresh in every process
+    before (a closure over a dispatcher is never found in numba's cache again), they cost 2-5 s per fresh
+    worker: most of a short run (``benchmarks/bench_sweep.py``)."""
+    fingerprint = 0
+
+    def accel_kernel(u, v, r, d, n, ext, P, out):
+        if fingerprint < 0:
+            return
+        for b in range(P.shape[1]):
+            for i in range(u.shape[0]):
+                a1, a2, a3 = ACCEL(u[i], v[i], r[i], d[i], n[i], ext[0, b], ext[1, b], ext[2, b], P, b)
+                out[b, i, 0] = a1
+                out[b, i, 1] = a2
+                out[b, i, 2] = a3
+
+    def wind_kernel(u_w, v_w, psi, Vw, wdir, P, k0, out):
+        # one member, the wind speed and direction per sample (the compiled integrator's own force function)
+        if fingerprint < 0:
+            return
+        Q = P.copy()
+        ccd = math.cos(P[k0 + 1, 0])
+        scd = math.sin(P[k0 + 1, 0])
+        for i in range(u_w.shape[0]):
+            Q[k0 + 2, 0] = Vw[i]
+            cp = math.cos(psi[i])
+            sp = math.sin(psi[i])
+            fx, fy, fn = _wind_forces(u_w[i], v_w[i], cp, sp, Q, k0, 0, ccd, scd, math.cos(wdir[i]),
+                                      math.sin(wdir[i]))
+            out[i, 0] = fx
+            out[i, 1] = fy
+            out[i, 2] = fn
+
+    return accel_kernel, wind_kernel
+
+
+_ACCEL_TEMPLATE, _WIND_TEMPLATE = _kernel_templates()
+
+
+def make_accel_kernel(accel, n_kind_params, kinematic_sway: bool = True):
+    """Compiled ``kernel(u, v, r, delta, n, ext, P, out)``: out[b, i] = accel(state i, member b), cached on disk
+    under the same key as the kind's integrator (``_fingerprint``)."""
+    tag = _kind_tag(accel, n_kind_params, kinematic_sway)
+    fp = _fingerprint(accel, n_kind_params, kinematic_sway)
+    return njit(cache=True, error_model="numpy")(_instantiate(_ACCEL_TEMPLATE, tag, fp, ACCEL=accel))
+
+
+def make_wind_kernel():
+    """Compiled ``kernel(u_w, v_w, psi, Vw, wdir, P, k0, out)`` (wind forces of one member per sample), cached
+    on disk keyed on this package's sources."""
+    fp = _fingerprint(_wind_forces, 0, True)
+    return njit(cache=True, error_model="numpy")(_instantiate(_WIND_TEMPLATE, "wind", fp))
 
 
 def _run_loop_asm(run, n_kind_params: int) -> str:

@@ -10,6 +10,7 @@ Origin at midship; delta > 0 turns the ship to starboard.
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 from numba import njit
@@ -171,11 +172,22 @@ def pack(vessel: dict) -> np.ndarray:
     return np.array([float(vals[k]) for k in PARAM_NAMES])
 
 
+@lru_cache(maxsize=1)
+def _accel_kernel():
+    # accel called from Python would be compiled afresh in every process (2-4 s: accel is not cached on disk);
+    # the kernel looping over it is (study.sim.core.make_accel_kernel)
+    from .core import make_accel_kernel
+
+    return make_accel_kernel(accel, len(PARAM_NAMES))
+
+
 def straight_surge_force(params: np.ndarray, u: float, n: float) -> float:
     """Net surge force on a straight course (v = r = delta = 0); zero at the self-propulsion point."""
-    P = params.reshape(-1, 1)
-    du, _, _ = accel(u, 0.0, 0.0, 0.0, n, 0.0, 0.0, 0.0, P, 0)
-    return du
+    P = np.ascontiguousarray(params, dtype=np.float64).reshape(-1, 1)
+    zero = np.zeros(1)
+    out = np.empty((1, 1, 3))
+    _accel_kernel()(np.array([float(u)]), zero, zero, zero, np.array([float(n)]), np.zeros((3, 1)), P, out)
+    return float(out[0, 0, 0])
 
 
 def solve_n(params: np.ndarray, U0: float) -> float:

@@ -36,7 +36,6 @@ from __future__ import annotations
 from typing import ClassVar
 
 import numpy as np
-from sklearn.base import BaseEstimator, RegressorMixin
 
 
 def as_arrays(X, y=None):
@@ -57,8 +56,37 @@ def as_arrays(X, y=None):
     return Xa, ya, names
 
 
-class Estimator(RegressorMixin, BaseEstimator):
-    """Base class: capabilities, the skip hook, and ``predict``. Subclasses implement ``fit``."""
+class Estimator:
+    """Base class: capabilities, the skip hook, and ``predict``. Subclasses implement ``fit``.
+
+    scikit-learn's parameter protocol (``get_params``/``set_params``, so that ``sklearn.base.clone`` works) and
+    ``score`` are scikit-learn's own (``BaseEstimator``, ``RegressorMixin``), called on first use rather than
+    inherited: importing scikit-learn costs about 1 s of CPU (it imports scipy.stats), which every fresh worker
+    paid before its first run (issue 13); runs by ls, lssvm, the SVR QPs, DE and emcee never need it."""
+
+    @classmethod
+    def _get_param_names(cls):
+        from sklearn.base import BaseEstimator
+
+        return BaseEstimator._get_param_names.__func__(cls)
+
+    def get_params(self, deep: bool = True) -> dict:
+        from sklearn.base import BaseEstimator
+
+        return BaseEstimator.get_params(self, deep=deep)
+
+    def set_params(self, **params):
+        from sklearn.base import BaseEstimator
+
+        return BaseEstimator.set_params(self, **params)
+
+    def score(self, X, y, sample_weight=None) -> float:
+        from sklearn.base import RegressorMixin
+
+        return RegressorMixin.score(self, X, y, sample_weight=sample_weight)
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({', '.join(f'{k}={v!r}' for k, v in self.get_params(deep=False).items())})"
 
     problem_types: ClassVar[frozenset] = frozenset({"regression"})
 

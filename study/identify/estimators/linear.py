@@ -11,9 +11,6 @@ import warnings
 import numpy as np
 import pandas as pd
 from scipy import linalg
-from sklearn.exceptions import ConvergenceWarning
-from sklearn.linear_model import LassoCV
-from sklearn.model_selection import KFold
 
 from .base import Estimator, as_arrays
 
@@ -83,6 +80,8 @@ def contiguous_folds(n: int, n_splits: int):
     n_splits = int(min(n_splits, n))
     if n_splits < 2:
         raise ValueError(f"cross-validation needs at least 2 folds and 2 samples (n = {n}, folds = {n_splits})")
+    from sklearn.model_selection import KFold  # imported on use: see base.Estimator
+
     return [val for _, val in KFold(n_splits=n_splits, shuffle=False).split(np.empty((n, 1)))]
 
 
@@ -231,6 +230,10 @@ class Lasso(Estimator):
         alphas = log_grid(self.alphas, "alphas")
         s, sy = column_scale(X), rms(y)
         Z, ys = X / s, y / sy
+        from sklearn.exceptions import ConvergenceWarning  # imported on use: see base.Estimator
+        from sklearn.linear_model import LassoCV
+        from sklearn.model_selection import KFold
+
         n_splits = int(min(self.cv, n))
         model = LassoCV(alphas=alphas[::-1], cv=KFold(n_splits=n_splits, shuffle=False), fit_intercept=False,
                         max_iter=self.max_iter, tol=self.tol, precompute=True)

@@ -120,7 +120,7 @@ def part_emcee(baseline: bool) -> dict:
     from bench_identify import seed000_training
 
     from study.identify.estimators import make_estimator
-    from study.identify.output_error import make_problem
+    from study.identify.fit import make_problem
     from study.identify.structures import make_structure
 
     v, model, structure, recs = seed000_training()

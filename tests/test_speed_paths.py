@@ -22,7 +22,7 @@ import pytest
 from study.identify.estimators import make_estimator
 from study.identify.estimators.bayes import LaplaceProposal
 from study.identify.models import make_model
-from study.identify.output_error import make_problem
+from study.identify.fit import make_problem
 from study.identify.structures import make_structure
 from study.measure import MeasurementModel
 from study.sim import load_vessel, simulate

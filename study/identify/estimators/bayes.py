@@ -153,6 +153,10 @@ class EmceeSampler(Estimator):
         state = p0
         steps, tau, ess, converged = 0, np.full(ndim, np.nan), 0.0, False
         last_adapt = 0  # 'laplace': the step of the proposal's last refit (the burn-in is at least this long)
+        # 'laplace' refits after a and 2a steps, a = check_every, but never past half the step budget: a short run
+        # (max_steps <= 2 check_every) would otherwise burn in its whole chain
+        a = max(1, min(self.check_every, self.max_steps // 4))
+        adapt_at = [a, 2 * a] if kind == "laplace" else []
         bar = None
         if progress:
             from tqdm.auto import tqdm
@@ -160,10 +164,11 @@ class EmceeSampler(Estimator):
             bar = tqdm(total=self.max_steps, desc="emcee steps", leave=False)
         try:
             while steps < self.max_steps:
-                n = min(self.check_every, self.max_steps - steps)
+                pending = [t - steps for t in adapt_at if t > steps]
+                n = min([self.check_every, self.max_steps - steps] + pending[:1])
                 state = sampler.run_mcmc(state, n, progress=False)
                 steps += n
-                if kind == "laplace" and steps in (self.check_every, 2 * self.check_every):
+                if steps in adapt_at:
                     # adapt twice, then freeze: the proposal refitted to the walkers' draws since the last
                     # adaptation (second half), which see what the Laplace approximation does not (the prior box,
                     # skew); the chain up to the last adaptation is burn-in, so the kept chain is an ordinary

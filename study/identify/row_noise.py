@@ -50,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 from scipy import linalg, optimize
+from scipy.linalg import lapack
 
 
 @dataclass
@@ -72,6 +73,18 @@ def _banded(S: sp.spmatrix, b: int) -> np.ndarray:
     for d in range(b + 1):
         ab[d, :n - d] = S.diagonal(-d)
     return ab
+
+
+def solve_lower_banded(c: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """``C^-1 B`` for a lower triangular banded ``C`` in ``scipy.linalg.cholesky_banded(lower=True)`` storage: LAPACK's
+    triangular banded solve (dtbtrs). ``scipy.linalg.solve_banded((b, 0), c, B)`` gives the same to rounding
+    (measured: 1e-15 relative, 9e-14 on the KT's three operators) but LU-factorises the triangle first (LAPACK
+    gbsv): twice the time, and half of the noise model's maximum-likelihood fit was that solve."""
+    B = np.asarray(B, float)
+    x, info = lapack.dtbtrs(c, B.reshape(len(B), -1), uplo="L")
+    if info != 0:
+        raise linalg.LinAlgError(f"row noise: the row covariance's Cholesky factor is singular (dtbtrs info {info})")
+    return x.reshape(B.shape)
 
 
 def _bandwidth(S: sp.spmatrix) -> int:
@@ -131,7 +144,7 @@ class RowNoise:
             c = self.cholesky(self.q_of(p))
         except (linalg.LinAlgError, ValueError):
             return np.inf
-        W = linalg.solve_banded((self.b, 0), c, np.column_stack([X, y]))
+        W = solve_lower_banded(c, np.column_stack([X, y]))
         Xw, yw = W[:, :-1], W[:, -1]
         th, *_ = np.linalg.lstsq(Xw, yw, rcond=None)
         r = yw - Xw @ th
@@ -188,4 +201,4 @@ class RowNoise:
 
     def whiten(self, A: np.ndarray) -> np.ndarray:
         """``C^-1 A`` with ``C C^T = Sigma(Q)`` (the fitted ``Q``, up to its scale)."""
-        return linalg.solve_banded((self.b, 0), self._chol, np.asarray(A, float))
+        return solve_lower_banded(self._chol, A)

@@ -35,17 +35,37 @@ Likelihoods (``likelihood``; the output-error one whenever the structure simulat
   records (all walkers in one batch simulation). Correct when the measurement noise is white and the model
   structure is right.
 
-Both regression posteriors are Gaussian in the coefficients (the iid one given its noise scale); each is sampled
-like any other so that the draws feed the predictive bands and the chain diagnostics.
+Both regression posteriors are known in closed form: 'regression' (and any informative prior) is Gaussian, N(mean,
+cov) from ``gaussian_regression``; 'regression_iid' under a flat prior is normal-inverse-gamma (the coefficients a
+multivariate t with n - k degrees of freedom, sigma^2 given them a scaled inverse chi-square), its weak normal prior
+aside. Each is still sampled, so that the draws feed the predictive bands and the chain diagnostics like any other
+run's, but with ``moves`` 'auto' the main move (0.9 of the steps) is an independence Metropolis-Hastings proposal
+from that closed form (:class:`LaplaceProposal` with ``df=inf``: the target itself; :class:`IidRegressionProposal`),
+the other 0.1 DE moves: measured on grand's 6 cases (central rows, 32 equations) and seed 000's training set,
+acceptance 0.92-0.94, tau 1.04-1.30 steps (DE moves: 9-52), every chain 200 steps (500-2,750), ESS 2,460-3,090,
+the chain's median and 90 % interval the closed form's within 3.6 Monte Carlo standard errors and its sd within
+0.96-1.04 (``benchmarks/bench_emcee_regression.py``; ``tests/test_emcee_regression_proposals.py``); fit time 0.28 of
+the DE moves' on grand's problems (0.10-0.38 on seed 000's), the rest mostly the closed form itself. The DE moves'
+chains before had sds 0.78-1.05 of the closed form's: emcee's ``DESnookerMove`` does not leave the target
+invariant (:class:`SnookerMove`, corrected here, is used instead).
 
 Priors (stated): regression coefficients independent normal N(0, (prior_scale sd(y) / rms(X_j))^2), i.e. one
 term may explain up to ~``prior_scale`` times the spread of the target; output-error parameters uniform in the
 problem's search box; noise scales uniform in log sigma (Jeffreys) on [1e-8, 10] x the target's (channel's)
-spread. Walkers start in a small ball around the least-squares / Gauss-Newton optimum.
+spread. Walkers start at draws of the closed-form posterior (regression) or of the Laplace approximation at the
+Gauss-Newton optimum (output error; a small ball where it is singular).
 
 Run length: chunks of ``check_every`` steps until the effective sample size (walkers x kept steps / the largest
 integrated autocorrelation time, emcee's estimator) reaches ``target_ess`` and the chain is longer than
-``min_tau_multiple`` x tau (50 by default, emcee's guidance), or ``max_steps``. The first half of the chain is discarded as burn-in.
+``min_tau_multiple`` x tau (50 by default, emcee's guidance), or ``max_steps``, and never fewer than ``min_steps``.
+The first half of the chain is discarded as burn-in. Defaults (``min_steps``, ``check_every`` None): 500 and 250
+steps; 200 and 50 for the closed-form proposal, whose tau is about 1.2: by 200 steps the ESS is about 2,700 and 50
+tau is 60 steps, so such a chain stops at the floor for any ``target_ess`` up to about 2,500. The floor is there because emcee's estimate of tau is biased low on short
+chains (each walker's autocorrelation is taken about its own mean): measured on correlated Gaussians with this
+proposal, 25-35 % low at 20 kept steps, 10 % at 100 (200 steps), so a chain stopped at 60 steps overstates its ESS
+by 14-22 %, one of 200 steps by at most 5 % (over 100 chains, the variance of the chain mean times the reported
+ESS: 0.95-1.04 at 200 steps, 1.14-1.22 at about 60). 200 steps x 32 walkers cost 0.03-0.1 s, less than the
+closed form itself.
 Recorded: acceptance fraction, tau, ESS, steps, whether the stopping rule was met; the thinned chain is saved
 (``chain.npz``); the parameter table gets the posterior median, sd and the central ``interval`` credible interval.
 """
@@ -71,7 +91,9 @@ class EmceeSampler(Estimator):
     target_ess : int
         Effective samples wanted (of the slowest-mixing parameter).
     max_steps, check_every, min_steps : int
-        Step budget, the chunk after which the stopping rule is checked, and a minimum.
+        Step budget, the chunk after which the stopping rule is checked, and a minimum. ``check_every``,
+        ``min_steps`` None (the default): :attr:`RUN_LENGTH`, 250 and 500, or 50 and 200 for the regression
+        likelihoods' closed-form proposal (see the module docstring).
     prior_scale : float
         Width of the regression coefficients' normal prior (see the module docstring).
     interval : float
@@ -82,17 +104,20 @@ class EmceeSampler(Estimator):
     min_tau_multiple : float
         The chain must be longer than this many autocorrelation times (emcee's guidance: 50).
     moves : str
-        'de': emcee's differential-evolution moves (DEMove 0.8, DESnookerMove 0.2; ter Braak & Vrugt 2008, as
+        'de': emcee's differential-evolution moves (DEMove 0.8, the snooker move 0.2, :class:`SnookerMove`: emcee's
+        ``DESnookerMove`` corrected; ter Braak & Vrugt 2008, as
         emcee's documentation suggests for correlated posteriors): measured 2.5x shorter autocorrelation times
         than the stretch move on a 14-dimensional correlated Gaussian. 'stretch': Goodman & Weare (emcee's
-        default). 'laplace' (output error only): an independence Metropolis-Hastings proposal
-        (``LaplaceProposal``: a multivariate t, 5 degrees of freedom, cut by the prior box) 0.8 of the steps, the
-        DE moves 0.2 of them. It starts at the Laplace approximation at the posterior mode and is refitted to the
+        default). 'laplace', regression: an independence Metropolis-Hastings proposal from the posterior in closed
+        form 0.9 of the steps, the DE moves 0.1 of them (see the module docstring). 'laplace', output error: an
+        independence proposal (``LaplaceProposal``: a multivariate t, 5 degrees of freedom, cut by the prior box)
+        0.8 of the steps, the DE moves 0.2 of them. It starts at the Laplace approximation at the posterior mode and
+        is refitted to the
         walkers' draws after ``check_every`` and 2 ``check_every`` steps, then frozen (the steps before are
         burn-in): the Laplace approximation alone is a poor proposal for a long replay (far from linear in the
         coefficients, cut by the box). Measured on ``benchmarks/bench_sweep.py``'s 17 dimensions: acceptance
         0.20, autocorrelation 16 steps against 112-120 with 'de', 1,000 steps against 7,250. 'auto': 'laplace'
-        for output error, 'de' for regression.
+        (for regression likelihoods and output error alike; 'de' where no Gaussian approximation exists).
     likelihood : str
         Regression structures: 'regression' (the rows' noise modelled with the structure's operators; default) or
         'regression_iid' (independent rows); see the module docstring. Output error ignores it.
@@ -105,9 +130,9 @@ class EmceeSampler(Estimator):
     problem_types = frozenset({"regression", "output_error"})
 
     def __init__(self, n_walkers: int | None = None, target_ess: int = 1000, max_steps: int = 20000,
-                 check_every: int = 250, min_steps: int = 500, prior_scale: float = 10.0, interval: float = 0.9,
-                 seed: int = 0, max_saved: int = 20000, min_tau_multiple: float = 50.0, moves: str = "auto",
-                 init: str = "auto", prior: dict | None = None, likelihood: str = "regression"):
+                 check_every: int | None = None, min_steps: int | None = None, prior_scale: float = 10.0,
+                 interval: float = 0.9, seed: int = 0, max_saved: int = 20000, min_tau_multiple: float = 50.0,
+                 moves: str = "auto", init: str = "auto", prior: dict | None = None, likelihood: str = "regression"):
         self.likelihood = likelihood
         self.prior = prior  # {source, sd, offset}: an informative prior (study.identify.priors), see fit
         self.n_walkers = n_walkers
@@ -128,24 +153,43 @@ class EmceeSampler(Estimator):
         w = self.n_walkers or max(32, 2 * ndim)
         return int(w + w % 2)
 
-    def _sample(self, log_prob, p0: np.ndarray, names: list, progress: bool, laplace=None):
-        """``laplace``: a :class:`LaplaceProposal` (the posterior's Laplace approximation cut by the prior box),
-        for ``moves`` 'laplace'/'auto'."""
+    #: the run-length defaults when ``min_steps`` / ``check_every`` are None: (min_steps, check_every) for chains
+    #: whose autocorrelation is tens of steps (DE, stretch, the output error's adapted proposal), and for the
+    #: regression chains whose main move draws from the posterior in closed form (tau about 1.2: see the class doc)
+    RUN_LENGTH = {"mixing": (500, 250), "closed_form": (200, 50)}
+    #: the share of DE moves next to an independence proposal: the output error's adapted proposal, the regression
+    #: posterior's closed form
+    DE_SHARE = {"adapted": 0.2, "closed_form": 0.1}
+
+    def _run_length(self, closed_form: bool) -> tuple[int, int]:
+        """(min_steps, check_every): the parameters as given, or the defaults of :attr:`RUN_LENGTH` when None."""
+        dflt = self.RUN_LENGTH["closed_form" if closed_form else "mixing"]
+        return (int(dflt[0] if self.min_steps is None else self.min_steps),
+                int(dflt[1] if self.check_every is None else self.check_every))
+
+    def _sample(self, log_prob, p0: np.ndarray, names: list, progress: bool, laplace=None, adapt: bool = True):
+        """``laplace``: an independence proposal for ``moves`` 'laplace'/'auto': a :class:`LaplaceProposal` (the
+        output error's Laplace approximation cut by the prior box, refitted to the draws: ``adapt``) or, for the
+        regression likelihoods, the posterior in closed form (:class:`LaplaceProposal` with ``df=inf``,
+        :class:`IidRegressionProposal`; fixed, ``adapt`` False)."""
         nw, ndim = p0.shape
         rng = np.random.default_rng(self.seed)
         kind = self.moves
         if kind == "auto":
             kind = "laplace" if laplace is not None else "de"
+        closed_form = kind == "laplace" and not adapt
+        min_steps, check_every = self._run_length(closed_form)
         if kind == "de":
-            moves = [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
+            moves = [(emcee.moves.DEMove(), 0.8), (SnookerMove(), 0.2)]
         elif kind == "stretch":
             moves = None
         elif kind == "laplace":
             if laplace is None:
-                raise ValueError("emcee: moves 'laplace' needs the output-error likelihood (structure output_error) "
-                                 "with a nonsingular Gauss-Newton information at the fit; use moves 'de'")
-            moves = [(emcee.moves.MHMove(laplace), 0.8), (emcee.moves.DEMove(), 0.16),
-                     (emcee.moves.DESnookerMove(), 0.04)]
+                raise ValueError("emcee: moves 'laplace' needs a Gaussian approximation of the posterior (output "
+                                 "error: a nonsingular Gauss-Newton information at the fit); use moves 'de'")
+            de = self.DE_SHARE["closed_form" if closed_form else "adapted"]
+            moves = [(emcee.moves.MHMove(laplace), 1.0 - de), (emcee.moves.DEMove(), 0.8 * de),
+                     (SnookerMove(), 0.2 * de)]
         else:
             raise ValueError(f"emcee: moves must be 'auto', 'de', 'stretch' or 'laplace', got {self.moves!r}")
         sampler = emcee.EnsembleSampler(nw, ndim, log_prob, vectorize=True, moves=moves)
@@ -155,8 +199,8 @@ class EmceeSampler(Estimator):
         last_adapt = 0  # 'laplace': the step of the proposal's last refit (the burn-in is at least this long)
         # 'laplace' refits after a and 2a steps, a = check_every, but never past half the step budget: a short run
         # (max_steps <= 2 check_every) would otherwise burn in its whole chain
-        a = max(1, min(self.check_every, self.max_steps // 4))
-        adapt_at = [a, 2 * a] if kind == "laplace" else []
+        a = max(1, min(check_every, self.max_steps // 4))
+        adapt_at = [a, 2 * a] if kind == "laplace" and adapt else []
         bar = None
         if progress:
             from tqdm.auto import tqdm
@@ -165,7 +209,7 @@ class EmceeSampler(Estimator):
         try:
             while steps < self.max_steps:
                 pending = [t - steps for t in adapt_at if t > steps]
-                n = min([self.check_every, self.max_steps - steps] + pending[:1])
+                n = min([check_every, self.max_steps - steps] + pending[:1])
                 state = sampler.run_mcmc(state, n, progress=False)
                 steps += n
                 if steps in adapt_at:
@@ -177,7 +221,7 @@ class EmceeSampler(Estimator):
                     last_adapt = steps
                 if bar is not None:
                     bar.update(n)
-                if steps < self.min_steps or steps <= last_adapt:
+                if steps < min_steps or steps <= last_adapt:
                     continue
                 chain = sampler.get_chain(discard=max(steps // 2, last_adapt))
                 tau = emcee.autocorr.integrated_time(chain, quiet=True, tol=0)
@@ -299,20 +343,28 @@ class EmceeSampler(Estimator):
             return np.where((ls_ > lo_s) & (ls_ < hi_s), lp, -np.inf)
 
         s_hat = math.sqrt(max(ss_min, 1e-300 * n) / max(n - k, 1))
-        cov = s_hat ** 2 * np.linalg.pinv(A)
         nw = self._walkers(k + 1)
         rng = np.random.default_rng(self.seed)
-        # walkers drawn from the Laplace approximation (the exact posterior under a flat prior): no burn-in
-        L = np.linalg.cholesky(cov + 1e-30 * np.eye(k) * np.max(np.abs(np.diag(cov))))
-        p0 = np.column_stack([ls + rng.standard_normal((nw, k)) @ L.T,
-                              math.log(max(s_hat, math.exp(lo_s + 1))) + 0.01 * rng.standard_normal(nw)])
-        flat, q = self._sample(log_prob, p0, names + ["log_sigma"], progress)
+        proposal = None
+        if self.moves in ("auto", "laplace") and n > k:
+            proposal = IidRegressionProposal(ls, A, ss_min, n, lo_s, hi_s)
+        if proposal is not None:  # start at equilibrium: draws from the flat-prior posterior
+            p0 = proposal.draw(nw, np.random.RandomState(int(rng.integers(2 ** 31))))
+        else:
+            cov = s_hat ** 2 * np.linalg.pinv(A)
+            # walkers drawn from the Laplace approximation (the exact posterior under a flat prior): no burn-in
+            L = np.linalg.cholesky(cov + 1e-30 * np.eye(k) * np.max(np.abs(np.diag(cov))))
+            p0 = np.column_stack([ls + rng.standard_normal((nw, k)) @ L.T,
+                                  math.log(max(s_hat, math.exp(lo_s + 1))) + 0.01 * rng.standard_normal(nw)])
+        flat, q = self._sample(log_prob, p0, names + ["log_sigma"], progress, laplace=proposal, adapt=False)
         self._summarise(flat, q, k)
         self.diagnostics_["sigma"] = float(np.exp(np.median(flat[:, k])))
         return self
 
     def _sample_gaussian(self, mean, cov, names, progress: bool):
-        """emcee on N(mean, cov), in standardised coordinates; walkers drawn from it (no burn-in needed)."""
+        """emcee on N(mean, cov), in standardised coordinates; walkers drawn from it (no burn-in needed). Under
+        ``moves`` 'auto'/'laplace' the main move proposes from N(mean, cov) itself (an independence proposal
+        equal to the target: every such proposal is accepted, up to rounding)."""
         k = len(mean)
         sd = np.sqrt(np.diag(cov))
         Pz = np.linalg.inv(cov / np.outer(sd, sd))  # precision of the standardised coefficients
@@ -324,33 +376,23 @@ class EmceeSampler(Estimator):
         nw = self._walkers(k)
         rng = np.random.default_rng(self.seed)
         p0 = mean + rng.standard_normal((nw, k)) @ np.linalg.cholesky(cov).T
-        flat, q = self._sample(log_prob, p0, list(names), progress)
+        proposal = None
+        if self.moves in ("auto", "laplace"):
+            proposal = LaplaceProposal(mean, cov, df=math.inf, inflate=1.0)
+        flat, q = self._sample(log_prob, p0, list(names), progress, laplace=proposal, adapt=False)
         self._summarise(flat, q, k)
 
     def _fit_informative(self, X, y, names, prior: dict, progress: bool):
         """The posterior under the run's informative prior N(mean0, sd0^2) per coefficient and the records'
         sandwich likelihood (least squares with its block cluster-robust covariance: the MAP estimator's model, module
-        ``prior``). That posterior is Gaussian; emcee samples it so that the draws feed the predictive bands
-        and the chain diagnostics like any other run's."""
+        ``prior``). That posterior is Gaussian; emcee samples it (:meth:`_sample_gaussian`) so that the draws feed
+        the predictive bands and the chain diagnostics like any other run's."""
         from .prior import gaussian_posterior
 
-        k = X.shape[1]
         mean0 = np.array([prior[c][0] for c in names], float)
         sd0 = np.array([prior[c][1] for c in names], float)
         m_map, cov, diag = gaussian_posterior(X, y, mean0, sd0)
-        sd = np.sqrt(np.diag(cov))
-        Pz = np.linalg.inv(cov / np.outer(sd, sd))  # precision of the standardised coefficients
-
-        def log_prob(p):
-            z = (p - m_map) / sd
-            return -0.5 * np.einsum("bi,ij,bj->b", z, Pz, z)
-
-        nw = self._walkers(k)
-        rng = np.random.default_rng(self.seed)
-        L = np.linalg.cholesky(cov)
-        p0 = m_map + rng.standard_normal((nw, k)) @ L.T
-        flat, q = self._sample(log_prob, p0, list(names), progress)
-        self._summarise(flat, q, k)
+        self._sample_gaussian(m_map, cov, names, progress)
         self.diagnostics_.update({"rho": diag["rho"], "data_blocks": diag["data_blocks"],
                                   "prior_widening": diag["prior_widening"]})
         self.prior_mean_, self.prior_sd_ = mean0, sd0
@@ -465,12 +507,43 @@ def _oe_laplace(problem, x0, nobs, max_iter: int = 10):
     return np.concatenate([centre, np.log(sig)]), cov
 
 
+class SnookerMove(emcee.moves.DESnookerMove):
+    """The differential-evolution snooker move of ter Braak & Vrugt (2008, Stat. Comput. 18, 435-446, Sec. 3.2),
+    as emcee's ``DESnookerMove`` with its normalisation corrected. From a walker x and a random walker z of the
+    other half of the ensemble, the move is along the line through x and z by gamma times the difference of the
+    projections of two more walkers z1, z2 on that line, accepted with the extra factor
+    (|x' - z| / |x - z|)^(d - 1). emcee (3.1.6, and its main branch) takes ``norm = |x - z|`` where its formulas
+    need ``|x - z|^2``: its step is |x - z| times the projected difference, and its factor the square root of the
+    right one, so the move does not leave the target invariant -- measured on a standard normal in 6 dimensions
+    (32 walkers, 5,000 steps, 4 chains): sd 0.82 alone, 0.96 mixed 0.2 with DEMove 0.8 (this estimator's 'de'
+    moves before), 1.00 corrected (``tests/test_emcee_regression_proposals.py``). Written here for that reason."""
+
+    def get_proposal(self, s, c, random):
+        randint = getattr(random, "integers", None) or random.randint
+        ns, ndim = s.shape
+        nc = list(map(len, c))
+        q = np.empty((ns, ndim), dtype=np.float64)
+        metropolis = np.empty(ns, dtype=np.float64)
+        for i in range(ns):
+            w = np.array([c[j][randint(nc[j])] for j in range(3)])
+            random.shuffle(w)
+            z, z1, z2 = w
+            delta = s[i] - z
+            norm2 = float(np.dot(delta, delta))  # emcee: np.linalg.norm(delta), i.e. |delta| (the bug)
+            u = delta / np.sqrt(norm2)  # the unit vector along the line
+            q[i] = s[i] + u * self.gammas * (np.dot(u, z1) - np.dot(u, z2))
+            d = q[i] - z
+            metropolis[i] = np.log(float(np.dot(d, d))) - np.log(norm2)
+        return q, 0.5 * (ndim - 1.0) * metropolis  # (d - 1) log(|x' - z| / |x - z|)
+
+
 class LaplaceProposal:
     """Independence proposal for emcee's ``MHMove``: a multivariate t with ``df`` degrees of freedom, location
     ``mean`` and scale matrix ``inflate^2 cov`` (the Laplace approximation). Heavier tails and the slight
     inflation keep the importance ratio target/proposal bounded where the posterior is wider than its Gaussian
     approximation; the Metropolis-Hastings correction (emcee's ``factors``: log q(x) - log q(x')) makes the chain
-    exact whatever the proposal. Written here because emcee ships no independence move."""
+    exact whatever the proposal. ``df=inf``: a normal (the regression posteriors, Gaussian in closed form: the
+    proposal is then the target itself). Written here because emcee ships no independence move."""
 
     def __init__(self, mean, cov, lo=None, hi=None, df: float = 5.0, inflate: float = 1.1):
         self.mean = np.asarray(mean, float)
@@ -484,7 +557,10 @@ class LaplaceProposal:
     def log_density(self, x):
         """Log density up to a constant (it cancels in the Metropolis-Hastings ratio)."""
         y = linalg.solve_triangular(self.L, (np.atleast_2d(x) - self.mean).T, lower=True)
-        return -0.5 * (self.df + len(self.mean)) * np.log1p(np.sum(y * y, axis=0) / self.df)
+        r2 = np.sum(y * y, axis=0)
+        if math.isinf(self.df):
+            return -0.5 * r2
+        return -0.5 * (self.df + len(self.mean)) * np.log1p(r2 / self.df)
 
     def refit(self, draws):
         """Location and scale from draws of the target (their mean and covariance), keeping df and the box."""
@@ -498,6 +574,8 @@ class LaplaceProposal:
 
     def _draw(self, n, random):
         z = random.randn(n, len(self.mean))
+        if math.isinf(self.df):
+            return self.mean + z @ self.L.T
         w = random.chisquare(self.df, n)
         return self.mean + (z @ self.L.T) / np.sqrt(w / self.df)[:, None]
 
@@ -519,3 +597,54 @@ class LaplaceProposal:
                 break
             q[out] = self._draw(int(out.sum()), random)
         return q
+
+
+class IidRegressionProposal:
+    """Independence proposal for the 'regression_iid' likelihood: its posterior under a flat prior on the
+    coefficients (the Jeffreys prior on log sigma, as the target's), drawn exactly (normal-inverse-gamma; e.g.
+    Gelman et al. 2013, Bayesian Data Analysis, 3rd ed., Sec. 14.2): theta a multivariate t with n - k degrees of
+    freedom, location the least-squares estimate and scale s^2 (X^T X)^-1, s^2 = SS_min / (n - k); then
+    sigma^2 = SS(theta) / chi^2_n. Its log density in (theta, log sigma) is the target's likelihood,
+    -n log sigma - SS(theta) / (2 sigma^2), so the importance ratio target / proposal is the coefficients' normal
+    prior (nearly flat: ``prior_scale`` 10) inside the box of log sigma: nearly every proposal is accepted, and the
+    Metropolis-Hastings correction keeps the chain exact. Draws outside the box are redrawn (the density inside
+    stays proportional to the proposal's, as in :class:`LaplaceProposal`)."""
+
+    def __init__(self, ls, A, ss_min: float, n: int, lo_s: float, hi_s: float):
+        self.ls, self.A = np.asarray(ls, float), np.asarray(A, float)
+        self.ss_min, self.n = float(ss_min), int(n)
+        k = len(self.ls)
+        self.nu = self.n - k
+        s2 = max(self.ss_min, 1e-300 * self.n) / self.nu
+        self.L = np.linalg.cholesky(s2 * np.linalg.inv(self.A))
+        self.lo_s, self.hi_s = float(lo_s), float(hi_s)
+
+    def _ss(self, th):
+        d = th - self.ls
+        return self.ss_min + np.einsum("bi,ij,bj->b", d, self.A, d)  # as the target computes it
+
+    def log_density(self, x):
+        x = np.atleast_2d(x)
+        k = len(self.ls)
+        ls_ = x[:, k]
+        return -self.n * ls_ - 0.5 * self._ss(x[:, :k]) / np.exp(2.0 * ls_)
+
+    def _draw(self, n, random):
+        k = len(self.ls)
+        th = self.ls + (random.randn(n, k) @ self.L.T) / np.sqrt(random.chisquare(self.nu, n) / self.nu)[:, None]
+        ls_ = 0.5 * np.log(self._ss(th) / random.chisquare(self.n, n))
+        return np.column_stack([th, ls_])
+
+    def draw(self, n, random):
+        """``n`` draws inside the box of log sigma (``random``: a numpy RandomState)."""
+        q = self._draw(n, random)
+        for _ in range(100):
+            out = ~((q[:, -1] > self.lo_s) & (q[:, -1] < self.hi_s))
+            if not out.any():
+                break
+            q[out] = self._draw(int(out.sum()), random)
+        return q
+
+    def __call__(self, coords, random):
+        q = self.draw(len(coords), random)
+        return q, self.log_density(coords) - self.log_density(q)

@@ -338,14 +338,19 @@ def part_sweep(base: Path, per_estimator: int, tmp: Path, startup: dict | None) 
 
 
 # ------------------------------------------------------------------------------------------------ launchers
-#: the sweep whose resumed jobs measure a launcher's cost per job: 18 sets of group overrides (structure x noise x
-#: estimator) x the seeds (a value override: jobs that differ only in it share one composition)
-OVERHEAD_SWEEP = ["experiment=tiny", "case=kt_nomoto2", "structure=euler,central,integral",
-                  "noise=none,low_relative,medium_relative", "estimator=ls,ridge", "progress=false"]
-OVERHEAD_SEEDS = (2, 6)  # two sweep sizes (36 and 108 jobs): the slope is the cost per job, fixed costs cancel
+#: the sweeps whose resumed jobs measure a launcher's cost per job, each at two sizes (36 and 108 jobs: the slope is
+#: the cost per job, fixed costs cancel). "distinct": every job its own set of group overrides (grand's case);
+#: "shared": 18 sets of group overrides x the seeds, a value override (seed001's case: jobs share a composition)
+_TINY = ["experiment=tiny", "structure=euler,central,integral", "noise=none,low_relative,medium_relative",
+         "progress=false"]
+OVERHEAD_SWEEPS = {
+    "distinct": (_TINY + ["case=kt_nomoto2,kt1_nomoto1,kcs_nomoto1,kcs_nomoto2"], ["estimator=ls"],
+                 ["estimator=ls,ridge,lssvm"]),
+    "shared": (_TINY + ["case=kt_nomoto2", "estimator=ls,ridge"], ["seed=0,1"], ["seed=0,1,2,3,4,5"]),
+}
 LAUNCHERS = {"joblib": ["hydra/launcher=joblib"],  # Hydra's joblib launcher, the project's `local` before
-             "local": ["hydra/launcher=local", "hydra.launcher.share_composition=false"],
-             "local_shared": ["hydra/launcher=local"]}
+             "local_plain": ["hydra/launcher=local", "hydra.launcher.share_composition=false"],
+             "local": ["hydra/launcher=local"]}
 #: the studies as the launcher part samples them, with the jobs of one group-override set (``shared``): grand as
 #: it was at 62b33f6 (1188 jobs; its noise levels then were the relative ones), seed001 as it is
 LAUNCH_STUDIES = {
@@ -371,60 +376,64 @@ def _timed(cmd: list[str], env: dict, cwd: Path) -> tuple[float, float, str]:
     return _children_cpu() - c0, time.perf_counter() - t0, p.stdout
 
 
-def launcher_overheads(tmp: Path, seeds=OVERHEAD_SEEDS) -> dict:
+def _grid(args: list[str]) -> list[str]:
+    """The jobs of a sweep's command-line arguments (cartesian product, in Hydra's order)."""
+    axes = [a.split("=", 1) for a in args]
+    return [" ".join(g) for g in itertools.product(*[[f"{k}={v}" for v in vals.split(",")] for k, vals in axes])]
+
+
+def launcher_overheads(tmp: Path) -> dict:
     """CPU per job that each launcher spends around the job itself, on jobs already finished (resumed: the job's
-    own work is a results-store lookup), from the slope between two sweep sizes (fixed costs -- the workers'
-    start, the sweeper's validation, the table rebuilt at the end -- cancel). Reference: the same jobs in one
-    process (``sweep_sample.py``: Hydra's compose API + the results store), whose store part is the job's own work."""
+    own work is a results-store lookup, about a millisecond), from the slope between two sweep sizes (fixed costs --
+    the workers' start, the sweeper's validation, the table rebuilt at the end -- cancel); two workers. Reference:
+    the same jobs in one process (``sweep_sample.py``: Hydra's compose API, then the results store)."""
     env = _env(ROOT)
-    res = tmp / "overhead-results"
-    env["STUDY_RESULTS_DIR"] = str(res)
     env["STUDY_TREE"] = str(ROOT)
+    out = {}
+    for kind, (common, small, large) in OVERHEAD_SWEEPS.items():
+        res = tmp / f"overhead-{kind}"
+        env["STUDY_RESULTS_DIR"] = str(res)
 
-    def sweep(n_seeds, launcher):
-        return [sys.executable, "-m", "study", "-m", *OVERHEAD_SWEEP, "seed=" + ",".join(map(str, range(n_seeds))),
-                *LAUNCHERS[launcher], f"hydra.sweep.dir={tmp / 'multirun' / f'{launcher}-{n_seeds}'}"]
+        def sweep(size, launcher):
+            return [sys.executable, "-m", "study", "-m", *common, *size, *LAUNCHERS[launcher],
+                    f"hydra.sweep.dir={tmp / 'multirun' / f'{kind}-{launcher}-{len(_grid(common + size))}'}"]
 
-    def jobs(n_seeds):
-        axes = [a.split("=", 1) for a in OVERHEAD_SWEEP]
-        grid = itertools.product(*[[f"{k}={v}" for v in vals.split(",")] for k, vals in axes],
-                                 [f"seed={s}" for s in range(n_seeds)])
-        return [" ".join(g) for g in grid]
-
-    _timed(sweep(max(seeds), "local_shared"), env, tmp)  # every run computed once: the rest resume it
-    out = {"seeds": list(seeds), "jobs": [len(jobs(s)) for s in seeds], "cpu": {}, "wall": {}}
-    for n_seeds in seeds:
-        for name in LAUNCHERS:  # interleaved: the machine's load falls on every launcher alike
-            cpu, wall, stdout = _timed(sweep(n_seeds, name), env, tmp)
-            assert stdout.count("(already finished, resumed)") == len(jobs(n_seeds)), stdout[-2000:]
-            out["cpu"].setdefault(name, []).append(cpu)
-            out["wall"].setdefault(name, []).append(wall)
-        cpu, wall, stdout = _timed([sys.executable, str(ROOT / "benchmarks" / "sweep_sample.py"), str(res),
-                                    *jobs(n_seeds)], env, tmp)
-        rows = [json.loads(line) for line in stdout.splitlines() if line.startswith("{")]
-        out["cpu"].setdefault("in_process", []).append(cpu)
-        out["wall"].setdefault("in_process", []).append(wall)
-        out.setdefault("job_cpu", []).append(float(np.mean([r["guarded_cpu"] for r in rows])))
-    dn = out["jobs"][1] - out["jobs"][0]
-    job = float(np.mean(out["job_cpu"]))
-    out["per_job_cpu"] = {k: (v[1] - v[0]) / dn for k, v in out["cpu"].items()}
-    out["fixed_cpu"] = {k: v[0] - out["per_job_cpu"][k] * out["jobs"][0] for k, v in out["cpu"].items()}
-    out["overhead_cpu"] = {k: v - job for k, v in out["per_job_cpu"].items()}  # around the job's own work
-    print(f"\nlaunchers: CPU per job from {out['jobs'][0]} and {out['jobs'][1]} resumed jobs (the job's own work "
-          f"{job * 1000:.0f} ms); 2 workers\n{'':14}{'per job':>9}{'around the job':>16}{'fixed':>9}")
-    for k in out["per_job_cpu"]:
-        print(f"{k:14}{out['per_job_cpu'][k]:>8.3f}s{out['overhead_cpu'][k]:>15.3f}s{out['fixed_cpu'][k]:>8.1f}s")
+        _timed(sweep(large, "local"), env, tmp)  # every run computed once: the measured sweeps resume them
+        o = {"jobs": [len(_grid(common + small)), len(_grid(common + large))], "cpu": {}, "wall": {}, "job_cpu": []}
+        for size in (small, large):
+            n = len(_grid(common + size))
+            for name in LAUNCHERS:  # interleaved: the machine's load falls on every launcher alike
+                cpu, wall, stdout = _timed(sweep(size, name), env, tmp)
+                assert stdout.count("(already finished, resumed)") == n, stdout[-2000:]
+                o["cpu"].setdefault(name, []).append(cpu)
+                o["wall"].setdefault(name, []).append(wall)
+            cpu, wall, stdout = _timed([sys.executable, str(ROOT / "benchmarks" / "sweep_sample.py"), str(res),
+                                        *_grid(common + size)], env, tmp)
+            rows = [json.loads(line) for line in stdout.splitlines() if line.startswith("{")]
+            o["cpu"].setdefault("in_process", []).append(cpu)
+            o["wall"].setdefault("in_process", []).append(wall)
+            o["job_cpu"].append(float(np.mean([r["guarded_cpu"] for r in rows])))
+        dn = o["jobs"][1] - o["jobs"][0]
+        job = float(np.mean(o["job_cpu"]))
+        o["per_job_cpu"] = {k: (v[1] - v[0]) / dn for k, v in o["cpu"].items()}
+        o["fixed_cpu"] = {k: v[0] - o["per_job_cpu"][k] * o["jobs"][0] for k, v in o["cpu"].items()}
+        o["overhead_cpu"] = {k: v - job for k, v in o["per_job_cpu"].items()}  # around the job's own work
+        print(f"\nlaunchers, {kind} jobs: CPU per job from {o['jobs'][0]} and {o['jobs'][1]} resumed jobs (the job's "
+              f"own work {job * 1000:.0f} ms)\n{'':14}{'per job':>9}{'fixed':>9}")
+        for k in o["per_job_cpu"]:
+            print(f"{k:14}{o['per_job_cpu'][k]:>8.3f}s{o['fixed_cpu'][k]:>8.1f}s")
+        out[kind] = o
     return out
 
 
 def part_launchers(tmp: Path, per_estimator: int, startup: dict | None) -> dict:
     """The per-job overhead of Hydra's joblib launcher against the project's (``launcher_overheads``), and the
     wall time of grand (as it was: 1188 jobs) and seed001 on 2 idle cores with each: the runs' own CPU (a sample per
-    estimator in one process, extrapolated), plus jobs x the launcher's CPU around each job (the project's: a
-    composition per set of group overrides, so with ``shared`` jobs per set: the shared cost + the rest / shared),
+    estimator in one process, extrapolated), plus jobs x the launcher's CPU around each job (the project's with
+    ``shared`` jobs per set of group overrides: the shared cost + (the distinct cost - the shared cost) / shared),
     plus the two workers' start."""
     out = {"overhead": launcher_overheads(tmp)}
-    oh = out["overhead"]["overhead_cpu"]
+    dist, shar = out["overhead"]["distinct"]["overhead_cpu"], out["overhead"]["shared"]["overhead_cpu"]
     ready = (startup or {}).get("new", {}).get("ready_cpu")
     if ready is None:
         ready = statistics.median(ready_once(ROOT)["ready_cpu"] for _ in range(3))
@@ -433,19 +442,19 @@ def part_launchers(tmp: Path, per_estimator: int, startup: dict | None) -> dict:
         jobs = sample_jobs(study, per_estimator, studies=LAUNCH_STUDIES)
         rows = time_sample(ROOT, study, jobs, tmp / f"{study}-launch")
         ext = extrapolate(study, rows, studies=LAUNCH_STUDIES)
-        per_job = {"joblib": oh["joblib"],
-                   "local": oh["local_shared"] + (oh["local"] - oh["local_shared"]) / spec["shared"]}
+        k = spec["shared"]
+        per_job = {"joblib": dist["joblib"], "local": shar["local"] + (dist["local"] - shar["local"]) / k}
         res = {"sample": rows, "run_core_s": ext["run_core_s"], "by_estimator_core_s": ext["by_estimator_core_s"]}
         for name, o in per_job.items():
             res[name] = {"overhead_per_job_cpu": o, "overhead_core_s": o * spec["jobs"],
                          "wall_estimate_s": (ext["run_core_s"] + o * spec["jobs"] + 2 * ready) / 2.0}
         res["ratio"] = res["local"]["wall_estimate_s"] / res["joblib"]["wall_estimate_s"]
-        print(f"\n{study} ({spec['jobs']} jobs, {spec['shared']} per set of group overrides): runs "
-              f"{ext['run_core_s'] / 2:.0f} s of wall on 2 cores (sample of {len(jobs)})")
+        print(f"\n{study} ({spec['jobs']} jobs, {k} per set of group overrides): the runs themselves "
+              f"{ext['run_core_s'] / 2:.0f} s of wall on 2 cores (from a sample of {len(jobs)})")
         for name in per_job:
             r = res[name]
             print(f"  {name:8} {r['overhead_per_job_cpu']:.3f} s CPU a job around the run: "
-                  f"{r['overhead_core_s'] / 2:.0f} s of wall; sweep {r['wall_estimate_s']:.0f} s")
+                  f"{r['overhead_core_s'] / 2:.0f} s of wall; the sweep {r['wall_estimate_s']:.0f} s")
         print(f"  local / joblib: {res['ratio']:.2f}" + (f"; target grand < 600 s: "
               f"{'PASS' if res['local']['wall_estimate_s'] < TARGETS['grand_s'] else 'MISS'}" if study == "grand"
                                                         else ""))

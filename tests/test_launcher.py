@@ -48,7 +48,7 @@ def _sweep(experiment: str, extra=()):
     return loader, master, jobs
 
 
-def _compare(experiment: str, pick, extra=()) -> tuple[int, int]:
+def _compare(experiment: str, pick, extra=()) -> tuple[int, int, dict]:
     from hydra import initialize_config_dir
     from hydra.core.utils import setup_globals
 
@@ -65,7 +65,7 @@ def _compare(experiment: str, pick, extra=()) -> tuple[int, int]:
             if diff:
                 bad.append(f"{' '.join(job)}: {diff[:4]}")
         assert not bad, f"{len(bad)} of {len(chosen)} jobs composed differently:\n" + "\n".join(bad[:10])
-    return len(chosen), composer.shared
+    return len(chosen), composer.shared, composer.loader.repository.counts
 
 
 def _shared_sample(jobs, composer, n_keys=3, n_more=6):
@@ -83,10 +83,14 @@ def _shared_sample(jobs, composer, n_keys=3, n_more=6):
     return sorted(first, key=lambda j: keys.index(composer.group_key(j))) + list(jobs[step // 2::step])[:n_more]
 
 
-@pytest.mark.parametrize("experiment", ["grand", "seed001_shallow_water"])
-def test_shared_composition_equals_hydras_on_a_sample(experiment):
-    n, shared = _compare(experiment, _shared_sample)
-    assert shared >= 6 and n >= 12  # the shared path was taken (value overrides: sampling interval, speed)
+@pytest.mark.parametrize("experiment", ["grand", "seed001_shallow_water", "smoke"])
+def test_composition_equals_hydras_on_a_sample(experiment):
+    n, shared, loads = _compare(experiment, _shared_sample)
+    if experiment == "smoke":  # group overrides only: Hydra's composition, on the configs loaded once
+        assert shared == 0 and n >= 6
+    else:  # the shared path was taken (value overrides: the sampling interval; seed001 also the speed)
+        assert shared >= 6 and n >= 12
+    assert loads["reused"] > 2 * loads["loaded"] > 0
 
 
 @pytest.mark.slow
@@ -98,7 +102,7 @@ def test_shared_composition_equals_hydras_on_every_job(experiment, extra):
     def every(jobs, composer):
         return [j for c in make_chunks([(i, j) for i, j in enumerate(jobs)], composer.group_key, 1) for _, j in c]
 
-    n, shared = _compare(experiment, every, extra)
+    n, shared, _ = _compare(experiment, every, extra)
     assert n == {"grand": 1188 if extra else 2376, "seed001_shallow_water": 1920}[experiment]
     assert shared == n  # every job has a value override (grand as it was: noise.sample_dt_LU=null)
 

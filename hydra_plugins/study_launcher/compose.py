@@ -1,39 +1,53 @@
-"""A sweep job's configuration, as Hydra's launchers compose it, composed once per distinct set of group choices.
+"""A sweep job's configuration, as Hydra's launchers compose it, for less: what is the same for many jobs is done once.
 
 Every Hydra launcher composes each job's configuration again in the worker (``ConfigLoader.load_sweep_config``:
 the primary config, its defaults list, every group option's YAML and Hydra's own config groups, then the job's
-overrides): 0.1 s of CPU a job on this project's configs, whatever the job. Jobs that differ only in *value*
-overrides (``seed=3``, ``noise.sample_dt_LU=0.05``, ``vessel.operation.U0=8.23``) share everything up to the last
-step, so :class:`JobComposer` composes once per distinct set of *group* overrides (``estimator=ls``) with Hydra's
-own ``load_sweep_config``, and for each job copies that configuration and applies the job's value overrides with
-the call Hydra itself makes for them (``ConfigLoaderImpl._apply_overrides_to_config``), then does Hydra's
-bookkeeping of the overrides (``hydra.overrides.task``, ``hydra.job.override_dirname``) as
-``ConfigLoaderImpl._load_configuration_impl`` does. Which overrides are group overrides is decided by Hydra's own
-classification (``hydra._internal.defaults_list.Overrides``) against the same config repository.
+overrides): 0.1 s of CPU a job on this project's configs, whatever the job. :class:`JobComposer` does two things
+once instead of every time, both exact:
 
-Why this is the same configuration: Hydra's composition is ``defaults list (group overrides only) -> merge ->
-struct mode -> value overrides in order -> bookkeeping``; value overrides never enter the defaults list or the
-merge, so the state before them is a function of the group overrides alone. Hydra internals are used (private
-but pinned: hydra-core 1.3), and ``tests/test_launcher.py`` checks node by node (values, node types, flags,
-metadata) that the result equals Hydra's own composition, on a sample of grand's and seed001's jobs in the
-default test run and on every job of both with ``-m slow``. Anything else -- an override of ``hydra.*``, a
-sweep-syntax value, a job without value overrides -- is composed by Hydra's ``load_sweep_config`` unchanged.
+* **Loaded configs** (``cache_loaded``): each config file (or structured config) Hydra loads -- read, parsed,
+  its defaults list built -- is kept per process, and every later load gets a fresh copy of it (an unpickling,
+  as if read again: Hydra is free to change what it gets). Hydra's composition is otherwise unchanged, and runs on
+  a copy of the config loader, so the launching process's own loader is untouched. About 40 % of a composition.
+* **Value overrides** (``share``): jobs that differ only in value overrides (``seed=3``,
+  ``noise.sample_dt_LU=0.05``, ``vessel.operation.U0=8.23``) share everything up to the last step of a
+  composition, so it is done once per distinct set of *group* overrides (``estimator=ls``) with Hydra's own
+  ``load_sweep_config``; for each job that configuration is copied and the job's value overrides are applied with
+  the call Hydra itself makes for them (``ConfigLoaderImpl._apply_overrides_to_config``), followed by Hydra's
+  bookkeeping of the overrides (``hydra.overrides.task``, ``hydra.job.override_dirname``) as
+  ``ConfigLoaderImpl._load_configuration_impl`` does it. Which overrides are group overrides is decided by Hydra's
+  own classification (``hydra._internal.defaults_list.Overrides``) against the same config repository. Why this is
+  the same configuration: Hydra's composition is ``defaults list (group overrides only) -> merge -> struct mode ->
+  value overrides in order -> bookkeeping``; value overrides never enter the defaults list or the merge, so the
+  state before them is a function of the group overrides alone. Anything else -- an override of ``hydra.*``, a
+  sweep-syntax value, a job without value overrides -- is composed by ``load_sweep_config`` itself.
+
+Hydra internals are used (private but pinned: hydra-core 1.3), and ``tests/test_launcher.py`` checks node by node
+(values, node types, flags, metadata) that the result equals Hydra's own composition, on a sample of grand's and
+seed001's jobs in the default test run and on every job of both with ``-m slow``.
 """
 # no `from __future__ import annotations`: Hydra execs plugin modules outside sys.modules (see covering_sweeper)
 
+import copy
 import io
 import pickle
 from collections import OrderedDict
 from typing import List, Optional, Sequence, Tuple
 
+from hydra._internal.config_repository import IConfigRepository
+from hydra.core.object_type import ObjectType
 from omegaconf import DictConfig, OmegaConf
 
 
 class JobComposer:
     """Compose sweep jobs' configurations for one sweep (one master config), in one process."""
 
-    def __init__(self, config_loader, master_config: DictConfig, share: bool = True, keep: int = 8) -> None:
+    def __init__(self, config_loader, master_config: DictConfig, share: bool = True, cache_loaded: bool = True,
+                 keep: int = 8) -> None:
         self.loader = config_loader
+        if cache_loaded:  # a copy: the launching process's loader (its sweeper's) stays Hydra's own
+            self.loader = copy.copy(config_loader)
+            self.loader.repository = _LoadedConfigs(config_loader.repository, {})
         self.master = master_config
         self.share = share
         self.keep = keep  # composed bases kept (jobs come grouped by their group overrides: a few suffice)
@@ -131,7 +145,7 @@ class JobComposer:
 
 
 class _Frozen:
-    """A configuration kept as a pickle, copied by unpickling it (1-2 ms; OmegaConf's deepcopy costs ten times
+    """An object (a configuration, Hydra's result of loading one) kept as a pickle, copied by unpickling it (1-2 ms; OmegaConf's deepcopy costs ten times
     that). Classes and functions (structured configs' types) are kept by identity, not by name: Hydra re-executes
     plugin modules when it rebuilds its plugin registry (``Singleton.set_state`` in a worker), after which a
     class found by its name is another object than the one the configuration holds."""
@@ -154,6 +168,53 @@ class _Frozen:
         unpickler = pickle.Unpickler(io.BytesIO(self.data))
         unpickler.persistent_load = self.objects.__getitem__
         return unpickler.load()
+
+
+class _LoadedConfigs(IConfigRepository):
+    """Hydra's config repository with every loaded config kept (per search path and config path) and handed out
+    as a fresh copy. Hydra copies its repository for every composition (``CachingConfigRepository`` deep-copies
+    it, so that a ``hydra.searchpath`` can re-initialise the copy's sources): the copy shares the kept configs, and
+    the wrapped repository is copied shallowly (re-initialising its sources rebinds its list, never changes a
+    source)."""
+
+    def __init__(self, inner, kept: dict, counts: Optional[dict] = None) -> None:
+        self.inner = inner
+        self.kept = kept
+        self.counts = {"loaded": 0, "reused": 0} if counts is None else counts
+
+    def __deepcopy__(self, memo):
+        return _LoadedConfigs(copy.copy(self.inner), self.kept, self.counts)
+
+    def load_config(self, config_path: str):
+        key = (tuple((s.provider, s.path) for s in self.inner.get_sources()), config_path)
+        kept = self.kept.get(key)
+        if kept is None:
+            ret = self.inner.load_config(config_path=config_path)
+            if ret is None:
+                return None
+            kept = self.kept[key] = _Frozen(ret)
+            self.counts["loaded"] += 1
+        else:
+            self.counts["reused"] += 1
+        return kept.copy()
+
+    def get_schema_source(self):
+        return self.inner.get_schema_source()
+
+    def initialize_sources(self, config_search_path) -> None:
+        self.inner.initialize_sources(config_search_path)
+
+    def group_exists(self, config_path: str) -> bool:
+        return self.inner.group_exists(config_path=config_path)
+
+    def config_exists(self, config_path: str) -> bool:
+        return self.inner.config_exists(config_path=config_path)
+
+    def get_group_options(self, group_name: str, results_filter: Optional[ObjectType] = ObjectType.CONFIG):
+        return self.inner.get_group_options(group_name=group_name, results_filter=results_filter)
+
+    def get_sources(self):
+        return self.inner.get_sources()
 
 
 def config_differences(a, b, path: str = "", out: Optional[List[str]] = None, limit: int = 20) -> List[str]:

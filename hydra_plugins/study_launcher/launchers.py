@@ -36,8 +36,8 @@ class StudyLocalConf:
     # worker processes: -1 every CPU this process may use, -2 all but one, ... (as joblib's n_jobs); 1: the jobs
     # run in the launching process, one after the other
     n_jobs: int = -1
-    # compose jobs that differ only in value overrides from one composition (compose.JobComposer); false: Hydra
-    # composes every job from scratch
+    # compose less (compose.JobComposer): loaded config files kept per worker, jobs that differ only in value
+    # overrides composed from one composition; false: Hydra composes every job from scratch
     share_composition: bool = True
 
 
@@ -173,7 +173,8 @@ class StudySlurmLauncher(_StudyLauncher):
         jobs = self._begin(job_overrides, initial_job_idx,
                            f"study_slurm ({n_tasks} array tasks of {per_task} jobs or fewer, {workers} workers each)")
         context = self._context(self.share_composition)
-        keyer = JobComposer(self.hydra_context.config_loader, self.config, share=self.share_composition)
+        keyer = JobComposer(self.hydra_context.config_loader, self.config, share=self.share_composition,
+                            cache_loaded=False)
         groups = task_groups(jobs, keyer.group_key, n_tasks)
         executor = self._executor()
         tasks = executor.map_array(TaskRunner(context.dumps(), workers), groups)

@@ -65,7 +65,7 @@ def install(context, in_process: bool = False) -> None:
         Singleton.set_state(context.singleton_state)
     _WORKER["context"] = context
     _WORKER["composer"] = JobComposer(context.hydra_context.config_loader, context.config,
-                                      share=context.share_composition)
+                                      share=context.share_composition, cache_loaded=context.share_composition)
 
 
 def composer():
@@ -130,7 +130,8 @@ def run_jobs(context: SweepContext, jobs: Sequence[Job], workers: int, installed
 
     from .compose import JobComposer
 
-    keyer = JobComposer(context.hydra_context.config_loader, context.config, share=context.share_composition)
+    keyer = JobComposer(context.hydra_context.config_loader, context.config, share=context.share_composition,
+                        cache_loaded=False)
     chunks = make_chunks(jobs, keyer.group_key, workers)
     workers = min(workers, len(chunks))
     log.info(f"Running {len(jobs)} jobs in {len(chunks)} chunks on {workers} worker processes")

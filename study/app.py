@@ -186,8 +186,11 @@ class SweepProgress(Callback):
         resumed = " (resumed)" if isinstance(rec, dict) and rec.get("resumed") else ""
         why = f" ({_reason(rec)})" if status_ == "skipped" and not resumed else ""
         total = os.environ.get(SWEEP_JOBS_ENV, "").strip()
-        print(f"[study] job {num + 1}/{total or '?'}: {status_}{resumed}{why}{took}; results folder: "
-              + ", ".join(f"{v} {k}" for k, v in sorted(counts.items())), flush=True)
+        # one write of the whole line: workers share the stdout, and print() writes the text and its newline
+        # apart (two workers' lines were seen joined on one line)
+        sys.stdout.write(f"[study] job {num + 1}/{total or '?'}: {status_}{resumed}{why}{took}; results folder: "
+                         + ", ".join(f"{v} {k}" for k, v in sorted(counts.items())) + "\n")
+        sys.stdout.flush()
 
 
 def _in_sweep() -> bool:

@@ -102,9 +102,10 @@ class JobComposer:
         self.composed += 1
         return self.loader.load_sweep_config(self.master, list(overrides))
 
-    def compose(self, overrides: Sequence[str]) -> DictConfig:
-        """The job's configuration, equal to :meth:`hydra_compose`'s."""
-        s = self.split(overrides) if self.share else None
+    def compose(self, overrides: Sequence[str], alone: bool = False) -> DictConfig:
+        """The job's configuration, equal to :meth:`hydra_compose`'s. ``alone``: no other job to come shares its
+        group overrides (a base kept for it would cost its pickling for nothing)."""
+        s = self.split(overrides) if self.share and not alone else None
         if s is None:
             return self.hydra_compose(overrides)
         groups, values, parsed = s

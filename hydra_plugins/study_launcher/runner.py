@@ -19,6 +19,7 @@ come back in the jobs' order whatever order they ran in.
 
 import logging
 import math
+from collections import Counter
 from typing import Any, Callable, Dict, List, Sequence, Tuple
 
 log = logging.getLogger(__name__)
@@ -72,14 +73,15 @@ def composer():
     return _WORKER["composer"]
 
 
-def run_one(num: int, overrides: Sequence[str]):
-    """One job in this process (its context installed): compose, number, run with Hydra's ``run_job``."""
+def run_one(num: int, overrides: Sequence[str], alone: bool = False):
+    """One job in this process (its context installed): compose, number, run with Hydra's ``run_job``.
+    ``alone``: no other job of its chunk shares its group overrides."""
     from hydra.core.hydra_config import HydraConfig
     from hydra.core.utils import run_job
     from omegaconf import open_dict
 
     ctx = _WORKER["context"]
-    sweep_config = _WORKER["composer"].compose(list(overrides))
+    sweep_config = _WORKER["composer"].compose(list(overrides), alone=alone)
     with open_dict(sweep_config):  # as Hydra's joblib launcher numbers its jobs
         sweep_config.hydra.job.id = f"{sweep_config.hydra.job.name}_{num}"
         sweep_config.hydra.job.num = num
@@ -90,7 +92,9 @@ def run_one(num: int, overrides: Sequence[str]):
 
 def run_chunk(chunk: Sequence[Job]) -> list:
     """Every job of a chunk, in order, in this process."""
-    return [run_one(num, overrides) for num, overrides in chunk]
+    keys = [composer().group_key(overrides) for _, overrides in chunk]
+    n = Counter(keys)
+    return [run_one(num, overrides, alone=n[k] == 1) for (num, overrides), k in zip(chunk, keys)]
 
 
 def make_chunks(jobs: Sequence[Job], key: Callable[[Sequence[str]], Any], workers: int,

@@ -24,7 +24,13 @@ ratio, so that a loaded machine slows both alike:
   reuses them), divided by the 2 cores: the wall time of the sweep on an idle 2-core machine. Target for grand:
   < 600 s.
 
-``python benchmarks/bench_sweep.py [--part startup,emcee,sweep] [--baseline-rev REV] [--sample N]``; figures
+* ``launcher`` -- **the launchers** (issue 13, the grouped launch): CPU per job that Hydra's joblib launcher and
+  the project's ``hydra/launcher=local`` (hydra_plugins/study_launcher; with and without compositions shared
+  between jobs that differ only in value overrides) spend around the job, from the slope between two sweep sizes
+  of resumed jobs (fixed costs cancel), against the same jobs in one process; then grand as it was (1188 jobs)
+  and seed001 estimated on 2 idle cores with each launcher (the runs' CPU from a sample per estimator).
+
+``python benchmarks/bench_sweep.py [--part startup,emcee,sweep,launcher] [--baseline-rev REV] [--sample N]``; figures
 go to ``benchmarks/results/bench_sweep.json``. Run with ``OPENBLAS_NUM_THREADS=1``.
 """
 from __future__ import annotations
@@ -192,9 +198,9 @@ STUDIES = {
 }
 
 
-def sample_jobs(study: str, per_estimator: int, seed: int = 0) -> list[str]:
+def sample_jobs(study: str, per_estimator: int, seed: int = 0, studies: dict = STUDIES) -> list[str]:
     """``per_estimator`` jobs of each estimator, the other axes drawn at random (seeded) from the sweep's."""
-    axes = {k: v.split(",") for k, v in STUDIES[study]["axes"].items()}
+    axes = {k: v.split(",") for k, v in studies[study]["axes"].items()}
     rng = np.random.default_rng(seed)
     jobs = []
     for est in axes["estimator"]:
@@ -230,12 +236,12 @@ def time_sample(tree: Path, study: str, jobs: list[str], results: Path) -> list[
     return rows[len(warm):]
 
 
-def extrapolate(study: str, rows: list[dict]) -> dict:
+def extrapolate(study: str, rows: list[dict], studies: dict = STUDIES) -> dict:
     """Core-seconds of the full sweep from the sample: per estimator, the mean CPU time of its sampled jobs
     (compose + run + store) times its number of jobs in the sweep; the stages likewise (the records' wall timings
     of each stage scaled by the job's CPU / wall)."""
-    n_est = len(STUDIES[study]["axes"]["estimator"].split(","))
-    per_est = STUDIES[study]["jobs"] / n_est
+    n_est = len(studies[study]["axes"]["estimator"].split(","))
+    per_est = studies[study]["jobs"] / n_est
     by = collections.defaultdict(list)
     stages = collections.Counter()
     w = per_est / len(rows) * n_est  # each sampled job stands for this many jobs of the sweep
@@ -249,8 +255,12 @@ def extrapolate(study: str, rows: list[dict]) -> dict:
         stages["compose"] += r["compose_cpu"] * w
         stages["store"] += max(r["guarded_s"] - r["run_s"], 0.0) * f * w
     total = sum(np.mean(v) * per_est for v in by.values())
+    guarded = collections.defaultdict(list)
+    for r in rows:
+        guarded[r["job"].rsplit("estimator=", 1)[1]].append(r["guarded_cpu"])
     return {"core_s": float(total), "by_estimator_core_s": {k: float(np.mean(v) * per_est) for k, v in by.items()},
-            "by_stage_core_s": dict(stages)}
+            "by_stage_core_s": dict(stages),
+            "run_core_s": float(sum(np.mean(v) * per_est for v in guarded.values()))}  # without composition
 
 
 LAUNCHER_JOBS = ("experiment=grand case=kvlcc2_mmg,kcs_mmg depth=deep,h_T_2p9 noise=low,medium "
@@ -327,9 +337,134 @@ def part_sweep(base: Path, per_estimator: int, tmp: Path, startup: dict | None) 
     return out
 
 
+# ------------------------------------------------------------------------------------------------ launchers
+#: the sweeps whose resumed jobs measure a launcher's cost per job, each at two sizes (36 and 108 jobs: the slope is
+#: the cost per job, fixed costs cancel). "distinct": every job its own set of group overrides (grand's case);
+#: "shared": 18 sets of group overrides x the seeds, a value override (seed001's case: jobs share a composition)
+_TINY = ["experiment=tiny", "structure=euler,central,integral", "noise=none,low_relative,medium_relative",
+         "progress=false"]
+OVERHEAD_SWEEPS = {
+    "distinct": (_TINY + ["case=kt_nomoto2,kt1_nomoto1,kcs_nomoto1,kcs_nomoto2"], ["estimator=ls"],
+                 ["estimator=ls,ridge,lssvm"]),
+    "shared": (_TINY + ["case=kt_nomoto2", "estimator=ls,ridge"], ["seed=0,1"], ["seed=0,1,2,3,4,5"]),
+}
+LAUNCHERS = {"joblib": ["hydra/launcher=joblib"],  # Hydra's joblib launcher, the project's `local` before
+             "local_plain": ["hydra/launcher=local", "hydra.launcher.share_composition=false"],
+             "local": ["hydra/launcher=local"]}
+#: the studies as the launcher part samples them, with the jobs of one group-override set (``shared``): grand as
+#: it was at 62b33f6 (1188 jobs; its noise levels then were the relative ones), seed001 as it is
+LAUNCH_STUDIES = {
+    "grand": {"jobs": 1188, "shared": 1, "axes": dict(STUDIES["grand"]["axes"], noise="low_relative,medium_relative")},
+    "seed001_shallow_water": {"jobs": 1920, "shared": 4, "axes": dict(
+        STUDIES["seed001_shallow_water"]["axes"], noise="none,low_relative,medium_relative")},
+}
+
+
+def _children_cpu() -> float:
+    import resource
+
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def _timed(cmd: list[str], env: dict, cwd: Path) -> tuple[float, float, str]:
+    """CPU of the whole process tree (every worker is a child that has ended) and wall time of a command."""
+    c0, t0 = _children_cpu(), time.perf_counter()
+    p = subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True)
+    if p.returncode != 0:
+        raise RuntimeError(f"{' '.join(cmd[:8])} ...: exit {p.returncode}: {p.stderr[-2000:]}")
+    return _children_cpu() - c0, time.perf_counter() - t0, p.stdout
+
+
+def _grid(args: list[str]) -> list[str]:
+    """The jobs of a sweep's command-line arguments (cartesian product, in Hydra's order)."""
+    axes = [a.split("=", 1) for a in args]
+    return [" ".join(g) for g in itertools.product(*[[f"{k}={v}" for v in vals.split(",")] for k, vals in axes])]
+
+
+def launcher_overheads(tmp: Path) -> dict:
+    """CPU per job that each launcher spends around the job itself, on jobs already finished (resumed: the job's
+    own work is a results-store lookup, about a millisecond), from the slope between two sweep sizes (fixed costs --
+    the workers' start, the sweeper's validation, the table rebuilt at the end -- cancel); two workers. Reference:
+    the same jobs in one process (``sweep_sample.py``: Hydra's compose API, then the results store)."""
+    env = _env(ROOT)
+    env["STUDY_TREE"] = str(ROOT)
+    out = {}
+    for kind, (common, small, large) in OVERHEAD_SWEEPS.items():
+        res = tmp / f"overhead-{kind}"
+        env["STUDY_RESULTS_DIR"] = str(res)
+
+        def sweep(size, launcher):
+            return [sys.executable, "-m", "study", "-m", *common, *size, *LAUNCHERS[launcher],
+                    f"hydra.sweep.dir={tmp / 'multirun' / f'{kind}-{launcher}-{len(_grid(common + size))}'}"]
+
+        _timed(sweep(large, "local"), env, tmp)  # every run computed once: the measured sweeps resume them
+        o = {"jobs": [len(_grid(common + small)), len(_grid(common + large))], "cpu": {}, "wall": {}, "job_cpu": []}
+        for size in (small, large):
+            n = len(_grid(common + size))
+            for name in LAUNCHERS:  # interleaved: the machine's load falls on every launcher alike
+                cpu, wall, stdout = _timed(sweep(size, name), env, tmp)
+                assert stdout.count("(already finished, resumed)") == n, stdout[-2000:]
+                o["cpu"].setdefault(name, []).append(cpu)
+                o["wall"].setdefault(name, []).append(wall)
+            cpu, wall, stdout = _timed([sys.executable, str(ROOT / "benchmarks" / "sweep_sample.py"), str(res),
+                                        *_grid(common + size)], env, tmp)
+            rows = [json.loads(line) for line in stdout.splitlines() if line.startswith("{")]
+            o["cpu"].setdefault("in_process", []).append(cpu)
+            o["wall"].setdefault("in_process", []).append(wall)
+            o["job_cpu"].append(float(np.mean([r["guarded_cpu"] for r in rows])))
+        dn = o["jobs"][1] - o["jobs"][0]
+        job = float(np.mean(o["job_cpu"]))
+        o["per_job_cpu"] = {k: (v[1] - v[0]) / dn for k, v in o["cpu"].items()}
+        o["fixed_cpu"] = {k: v[0] - o["per_job_cpu"][k] * o["jobs"][0] for k, v in o["cpu"].items()}
+        o["overhead_cpu"] = {k: v - job for k, v in o["per_job_cpu"].items()}  # around the job's own work
+        print(f"\nlaunchers, {kind} jobs: CPU per job from {o['jobs'][0]} and {o['jobs'][1]} resumed jobs (the job's "
+              f"own work {job * 1000:.0f} ms)\n{'':14}{'per job':>9}{'fixed':>9}")
+        for k in o["per_job_cpu"]:
+            print(f"{k:14}{o['per_job_cpu'][k]:>8.3f}s{o['fixed_cpu'][k]:>8.1f}s")
+        out[kind] = o
+    return out
+
+
+def part_launchers(tmp: Path, per_estimator: int, startup: dict | None) -> dict:
+    """The per-job overhead of Hydra's joblib launcher against the project's (``launcher_overheads``), and the
+    wall time of grand (as it was: 1188 jobs) and seed001 on 2 idle cores with each: the runs' own CPU (a sample per
+    estimator in one process, extrapolated), plus jobs x the launcher's CPU around each job (the project's with
+    ``shared`` jobs per set of group overrides: the shared cost + (the distinct cost - the shared cost) / shared),
+    plus the two workers' start."""
+    out = {"overhead": launcher_overheads(tmp)}
+    dist, shar = out["overhead"]["distinct"]["overhead_cpu"], out["overhead"]["shared"]["overhead_cpu"]
+    ready = (startup or {}).get("new", {}).get("ready_cpu")
+    if ready is None:
+        ready = statistics.median(ready_once(ROOT)["ready_cpu"] for _ in range(3))
+    out["ready_cpu"] = ready
+    for study, spec in LAUNCH_STUDIES.items():
+        jobs = sample_jobs(study, per_estimator, studies=LAUNCH_STUDIES)
+        rows = time_sample(ROOT, study, jobs, tmp / f"{study}-launch")
+        ext = extrapolate(study, rows, studies=LAUNCH_STUDIES)
+        k = spec["shared"]
+        per_job = {"joblib": dist["joblib"], "local": shar["local"] + (dist["local"] - shar["local"]) / k}
+        res = {"sample": rows, "run_core_s": ext["run_core_s"], "by_estimator_core_s": ext["by_estimator_core_s"]}
+        for name, o in per_job.items():
+            res[name] = {"overhead_per_job_cpu": o, "overhead_core_s": o * spec["jobs"],
+                         "wall_estimate_s": (ext["run_core_s"] + o * spec["jobs"] + 2 * ready) / 2.0}
+        res["ratio"] = res["local"]["wall_estimate_s"] / res["joblib"]["wall_estimate_s"]
+        print(f"\n{study} ({spec['jobs']} jobs, {k} per set of group overrides): the runs themselves "
+              f"{ext['run_core_s'] / 2:.0f} s of wall on 2 cores (from a sample of {len(jobs)})")
+        for name in per_job:
+            r = res[name]
+            print(f"  {name:8} {r['overhead_per_job_cpu']:.3f} s CPU a job around the run: "
+                  f"{r['overhead_core_s'] / 2:.0f} s of wall; the sweep {r['wall_estimate_s']:.0f} s")
+        print(f"  local / joblib: {res['ratio']:.2f}" + (f"; target grand < 600 s: "
+              f"{'PASS' if res['local']['wall_estimate_s'] < TARGETS['grand_s'] else 'MISS'}" if study == "grand"
+                                                        else ""))
+        out[study] = res
+    return out
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--part", default="startup,emcee,sweep")
+    ap.add_argument("--part", default="startup,emcee,sweep,launcher")
     ap.add_argument("--baseline-rev", default=BASELINE_REV)
     ap.add_argument("--repeats", type=int, default=5, help="startup: child processes per tree")
     ap.add_argument("--sample", type=int, default=3, help="sweep: sampled jobs per estimator")
@@ -340,7 +475,7 @@ def main(argv=None):
     parts = args.part.split(",")
     out = {"platform": platform.platform(), "cpus": os.cpu_count(), "load_before": os.getloadavg(),
            "baseline_rev": args.baseline_rev}
-    base = baseline_tree(args.baseline_rev)
+    base = baseline_tree(args.baseline_rev) if {"startup", "sweep"} & set(parts) else None
     if "startup" in parts:
         out["startup"] = part_startup(base, args.repeats)
     if "emcee" in parts:
@@ -350,7 +485,12 @@ def main(argv=None):
 
         with tempfile.TemporaryDirectory() as tmp:
             out["sweep"] = part_sweep(base, args.sample, Path(tmp), out.get("startup"))
-    if not args.keep_baseline:  # the temporary worktree is registered in the repository: remove it
+    if "launcher" in parts:
+        import tempfile
+
+        with tempfile.TemporaryDirectory() as tmp:
+            out["launcher"] = part_launchers(Path(tmp), args.sample, out.get("startup"))
+    if base is not None and not args.keep_baseline:  # the temporary worktree is registered in the repository
         subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base)], capture_output=True)
     out["load_after"] = os.getloadavg()
     res = ROOT / "benchmarks" / "results" / "bench_sweep.json"

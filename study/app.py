@@ -28,20 +28,23 @@ log = logging.getLogger("study")
 CONF_DIR = str(config.CONF_DIR)  # Hydra's config_path
 
 
-def _register_covering_sweeper() -> None:
+def _register_plugins() -> None:
     """conf/config.yaml uses hydra_plugins/study_sweeper (Hydra's basic sweeper composing only a covering
-    subset of the jobs up front). Hydra finds plugins by scanning the `hydra_plugins` namespace, which a
-    setuptools editable install (`pip install -e .`) hides from the scan, so it is registered by hand here,
+    subset of the jobs up front), conf/hydra/launcher/ hydra_plugins/study_launcher (the launchers running a
+    sweep's jobs in long-lived workers). Hydra finds plugins by scanning the `hydra_plugins` namespace, which a
+    setuptools editable install (`pip install -e .`) hides from the scan, so they are registered by hand here,
     before any config is composed."""
     from hydra.core.plugins import Plugins
 
     plugins = Plugins.instance()  # first: its scan re-executes Hydra's core plugin modules, BasicSweeper's too
+    from hydra_plugins.study_launcher.launchers import StudyLocalLauncher, StudySlurmLauncher
     from hydra_plugins.study_sweeper.covering_sweeper import CoveringSweeper
 
-    plugins.register(CoveringSweeper)
+    for plugin in (CoveringSweeper, StudyLocalLauncher, StudySlurmLauncher):
+        plugins.register(plugin)
 
 
-_register_covering_sweeper()
+_register_plugins()
 
 
 def _results_dir(cfg: DictConfig) -> Path:
@@ -183,8 +186,11 @@ class SweepProgress(Callback):
         resumed = " (resumed)" if isinstance(rec, dict) and rec.get("resumed") else ""
         why = f" ({_reason(rec)})" if status_ == "skipped" and not resumed else ""
         total = os.environ.get(SWEEP_JOBS_ENV, "").strip()
-        print(f"[study] job {num + 1}/{total or '?'}: {status_}{resumed}{why}{took}; results folder: "
-              + ", ".join(f"{v} {k}" for k, v in sorted(counts.items())), flush=True)
+        # one write of the whole line: workers share the stdout, and print() writes the text and its newline
+        # apart (two workers' lines were seen joined on one line)
+        sys.stdout.write(f"[study] job {num + 1}/{total or '?'}: {status_}{resumed}{why}{took}; results folder: "
+                         + ", ".join(f"{v} {k}" for k, v in sorted(counts.items())) + "\n")
+        sys.stdout.flush()
 
 
 def _in_sweep() -> bool:

@@ -82,9 +82,9 @@ def _env() -> dict:
     return env
 
 
-def _sweep_cmd(results: Path, name: str, *overrides: str) -> list[str]:
+def _sweep_cmd(results: Path, name: str, *overrides: str, launcher: str = "slurm") -> list[str]:
     """The sweep as a researcher types it (plus a unique job name, so that the test can find and cancel its jobs)."""
-    return [sys.executable, "-m", "study", "-m", "hydra/launcher=slurm", f"hydra.launcher.name={name}",
+    return [sys.executable, "-m", "study", "-m", f"hydra/launcher={launcher}", f"hydra.launcher.name={name}",
             "experiment=tiny", "case=kt_nomoto2", f"results_dir={results}", "progress=false", *overrides]
 
 
@@ -152,7 +152,7 @@ def _check_tables(results: Path, records: dict[str, dict]) -> pd.DataFrame:
 def test_sweep_lands_every_record_once_and_records_a_failing_job(cluster, tmp_path):
     """Six jobs on the cluster: ls, lssvm and ridge on two seeds, ridge given one cross-validation fold (it raises:
     at least two are needed). The four others finish ok, the two ridge runs are recorded as failed with the error,
-    and the sweep itself ends normally with the tables rebuilt from all six records. The sweep goes in batches of
+    and the sweep ends with its count of failed runs (exit status 1) and the tables rebuilt from all six records. The sweep goes in batches of
     four (hydra.sweeper.max_batch_size, how a sweep larger than a site's MaxArraySize is submitted): two arrays."""
     name = f"study-test-{uuid.uuid4().hex[:8]}"
     results = tmp_path / "shared" / "results"  # absolute: the jobs resolve it on the compute node
@@ -162,7 +162,8 @@ def test_sweep_lands_every_record_once_and_records_a_failing_job(cluster, tmp_pa
     cmd = _sweep_cmd(results, name, "estimator=ls,lssvm,ridge", "seed=0,1", "+estimator_overrides.ridge.n_splits=1",
                      "hydra.sweeper.max_batch_size=4")
     rc = _run_sweep(cmd, work, log, name)
-    assert rc == 0, _tail(log)
+    # the sweep ends with its count, and exit status 1 for the failed runs (study.app.sweep_finished)
+    assert rc == 1 and "[study] sweep finished: 6 jobs, 2 failed, 4 ok" in log.read_text(errors="replace"), _tail(log)
     assert list(work.glob("multirun/*/*/.submitit")), "the sweep did not go through submitit"
 
     recs = _records(results)
@@ -247,4 +248,101 @@ def test_cancelled_sweep_is_finished_by_the_same_command(cluster, tmp_path):
     # the re-run's jobs said so, each in its own log (the app's line for a run found finished)
     logs = "\n".join(p.read_text(errors="replace") for p in work.glob("multirun/*/*/.submitit/*/*_log.*"))
     assert logs.count("(already finished, resumed)") == len(before), logs[-3000:]
+    _check_tables(results, after)
+
+
+# ------------------------------------------------------------------------------------------ grouped runs
+def _task_logs(work: Path) -> dict[str, str]:
+    """Each array task's output (submitit's <array>_<index>/<array>_<index>_0_log.out), by task."""
+    return {p.parent.name: p.read_text(errors="replace") for p in work.glob("multirun/*/*/.submitit/*_*/*_0_log.out")}
+
+
+def test_grouped_sweep_lands_every_record_once_and_records_a_failing_job(cluster, tmp_path):
+    """``hydra/launcher=slurm_grouped``: six jobs (ls, lssvm and ridge on two seeds; ridge given one
+    cross-validation fold fails) in two array tasks of three jobs, each task running its jobs on a pool of two
+    worker processes. Every record lands once, the two ridge runs are recorded as failed while the four others
+    finish ok, the sweep ends with its count of failed runs (exit status 1) and the tables are rebuilt."""
+    name = f"study-test-{uuid.uuid4().hex[:8]}"
+    results = tmp_path / "shared" / "results"
+    work = tmp_path / "login"
+    work.mkdir()
+    log = tmp_path / "sweep.log"
+    cmd = _sweep_cmd(results, name, "estimator=ls,lssvm,ridge", "seed=0,1", "+estimator_overrides.ridge.n_splits=1",
+                     "hydra.launcher.jobs_per_task=3", "hydra.launcher.cpus_per_task=2", launcher="slurm_grouped")
+    rc = _run_sweep(cmd, work, log, name)
+    out = log.read_text(errors="replace")
+    assert rc == 1 and "[study] sweep finished: 6 jobs, 2 failed, 4 ok" in out, _tail(log)
+
+    recs = _records(results)
+    assert len(recs) == 6, f"{len(recs)} records: {sorted(recs)}\n{_tail(log)}"
+    assert len({r["run_id"] for r in recs.values()}) == 6
+    by = {(r["config"]["estimator"]["name"], r["seed"]): r for r in recs.values()}
+    assert set(by) == {(e, s) for e in ("ls", "lssvm", "ridge") for s in (0, 1)}
+    for (est, seed), r in by.items():
+        if est == "ridge":
+            assert r["status"] == "failed" and "cross-validation needs at least 2 folds" in r["error"]
+        else:
+            assert r["status"] == "ok" and r["params"], r.get("error")
+    # one array of two tasks, each of which ran three jobs (its [study] job lines)
+    logs = _task_logs(work)
+    assert len(logs) == 2 and len({t.split("_")[0] for t in logs}) == 1, sorted(logs)
+    assert sorted(t.count("[study] job ") for t in logs.values()) == [3, 3], logs
+    jobs = sorted(int(m) for t in logs.values() for m in re.findall(r"\[study\] job (\d+)/6", t))
+    assert jobs == [1, 2, 3, 4, 5, 6]
+    # each task ran its jobs on a pool of two worker processes (the task's own line), one BLAS thread each
+    assert all("study_slurm task: 3 jobs on 2 worker processes" in t for t in logs.values()), logs
+    assert all(r["provenance"]["omp_num_threads"] == 1 for r in recs.values())
+    _check_tables(results, recs)
+
+
+def test_grouped_cancelled_sweep_is_finished_by_the_same_command(cluster, tmp_path):
+    """Eight jobs in four array tasks of two (one CPU each: the jobs run in the task's own process, one after the
+    other); once two records have landed the array is cancelled. The same command finishes the sweep: every record
+    once, and the runs finished before the cancel not run again."""
+    name = f"study-test-{uuid.uuid4().hex[:8]}"
+    results = tmp_path / "shared" / "results"
+    work = tmp_path / "login"
+    work.mkdir()
+    log = tmp_path / "sweep.log"
+    cmd = _sweep_cmd(results, name, "estimator=ls,lssvm", "seed=0,1,2,3", "hydra.launcher.jobs_per_task=2",
+                     launcher="slurm_grouped")
+    n_runs = 8
+    with open(log, "ab") as fh:
+        proc = subprocess.Popen(cmd, cwd=work, env=_env(), stdout=fh, stderr=subprocess.STDOUT)
+        try:
+            deadline = time.monotonic() + SWEEP_TIMEOUT
+            while len(_records(results)) < 2:
+                assert proc.poll() is None, f"the sweep ended before any cancel:\n{_tail(log)}"
+                assert time.monotonic() < deadline, f"no two records within {SWEEP_TIMEOUT} s:\n{_tail(log)}"
+                time.sleep(0.2)
+            _scancel(name)
+            t_cancel = time.monotonic()
+            while _queued(name) and time.monotonic() - t_cancel < 60:
+                time.sleep(0.5)
+            assert not _queued(name), f"jobs still queued a minute after scancel: {_queued(name)}"
+            try:  # without accounting submitit cannot tell the tasks were cancelled: Ctrl-C, as a researcher
+                rc_first = proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                proc.send_signal(signal.SIGINT)
+                rc_first = _finish(proc, log, name, timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+            _scancel(name)
+    assert rc_first != 0, "a sweep whose tasks were cancelled must not end as a success"
+    before = _records(results)
+    assert 2 <= len(before) < n_runs, f"the cancel did not land half way: {len(before)} of {n_runs} records"
+    assert all(r.get("status") == "ok" for r in before.values()), before
+    first_logs = set(_task_logs(work))
+
+    rc = _run_sweep(cmd, work, log, name)
+    assert rc == 0, _tail(log)
+    after = _records(results)
+    assert len(after) == n_runs and all(r["status"] == "ok" for r in after.values()), sorted(after)
+    for p, r in before.items():
+        assert after[p] == r, f"{p} was rewritten by the re-run"
+    logs = {k: v for k, v in _task_logs(work).items() if k not in first_logs}
+    assert len(logs) == 4 and sorted(t.count("[study] job ") for t in logs.values()) == [2, 2, 2, 2], sorted(logs)
+    assert "".join(logs.values()).count("(already finished, resumed)") == len(before)
     _check_tables(results, after)

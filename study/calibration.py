@@ -72,7 +72,8 @@ def records(case: Case, seed: int, noise_free: bool = False) -> list:
 
     conf = case.conf
     if noise_free:
-        conf = dict(conf, noise={**conf["noise"], "level": 0.0})
+        # the relative kind at level 0: an absolute noise config (per sensor) has no level to zero
+        conf = dict(conf, noise={**conf["noise"], "kind": "relative", "level": 0.0})
     return [measurement(conf, seed=seed * 7919 + i, vessel=case.truth_vessel).apply(df)
             for i, df in enumerate(case.clean)]
 

@@ -136,13 +136,14 @@ class TruncationStructure:
 
 def coefficient_bias(noise, X: np.ndarray, e: np.ndarray, centred: bool = False) -> np.ndarray:
     """The coefficients' bias from row errors ``e`` through the posterior's GLS map with the fitted whitening
-    ``noise`` (a ``RowNoise``): ``(X_w' X_w)^-1 X_w' e_w``. ``centred``: the rows' free intercept (diff_center) is
-    part of the map, as in the posterior."""
+    ``noise`` (a ``RowNoise``; None: the rows as they are, least squares): ``(X_w' X_w)^-1 X_w' e_w``.
+    ``centred``: the rows' free intercept (diff_center) is part of the map, as in the posterior."""
     X = np.asarray(X, float)
     k = X.shape[1]
     if centred:
         X = np.column_stack([X, np.ones(len(X))])
-    Xw, ew = noise.whiten(X), noise.whiten(np.asarray(e, float))
+    e = np.asarray(e, float)
+    Xw, ew = (X, e) if noise is None else (noise.whiten(X), noise.whiten(e))  # None: rows not whitened (LS)
     b, *_ = np.linalg.lstsq(Xw, ew, rcond=None)
     return b[:k]
 

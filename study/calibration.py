@@ -72,7 +72,8 @@ def records(case: Case, seed: int, noise_free: bool = False) -> list:
 
     conf = case.conf
     if noise_free:
-        conf = dict(conf, noise={**conf["noise"], "level": 0.0})
+        # the relative kind at level 0: an absolute noise config (per sensor) has no level to zero
+        conf = dict(conf, noise={**conf["noise"], "kind": "relative", "level": 0.0})
     return [measurement(conf, seed=seed * 7919 + i, vessel=case.truth_vessel).apply(df)
             for i, df in enumerate(case.clean)]
 
@@ -107,11 +108,20 @@ def _limit(model, names, mean) -> dict:
     return dict(zip(names, map(float, mean)))
 
 
+class _Whitening:
+    """The fitted noise model as ``truncation_bias`` reads it off an estimator (``row_noise_``)."""
+
+    def __init__(self, noise):
+        self.row_noise_ = noise
+
+
 def dataset_intervals(case: Case, structure, seed: int, likelihood: str = "regression", level: float = 0.9,
                       draws: int = 4000) -> list[dict]:
-    """One dataset: per reported parameter its estimate, interval, truth and the structure's noise-free limit."""
+    """One dataset: per reported parameter its estimate, interval, truth, the structure's noise-free limit and
+    ``bias_est``, the truncation bias the run estimates from its own noisy records (``study.identify.truncation``;
+    its aim: ``limit - truth``)."""
     from .identify.estimators.bayes import EmceeSampler
-    from .identify.fit import prepare
+    from .identify.fit import prepare, truncation_bias, truncation_rows
 
     if likelihood not in LIKELIHOODS:
         raise ValueError(f"likelihood must be one of {LIKELIHOODS}, got {likelihood!r}")
@@ -122,6 +132,7 @@ def dataset_intervals(case: Case, structure, seed: int, likelihood: str = "regre
     truth = model.truth()[0]
     est = EmceeSampler(interval=level)
     rng = np.random.default_rng(seed)
+    trunc = truncation_rows(model, structure, records(case, seed))  # estimated from the noisy records only
     out = []
     for eq, pr in noisy.items():
         names = list(pr.X.columns)
@@ -135,12 +146,17 @@ def dataset_intervals(case: Case, structure, seed: int, likelihood: str = "regre
         else:
             mean, cov, s2 = _iid_posterior(X, y, sd0)
             lim = _iid_posterior(Xc, yc, sd0, s2)[0]
+            noise = None
+        # the run's own estimate of the structure's truncation bias (study.identify.truncation), at the estimate
+        b = truncation_bias(_Whitening(noise), pr, trunc.get(eq), mean, names)
+        biased = _limit(model, names, mean + np.array([b.get(n, np.nan) for n in names]))
         rep = _reported(model, names, mean, cov, rng, draws, level)
         limit = _limit(model, names, lim)
         for p, (m, lo, hi) in rep.items():
             if p in truth:
                 out.append({"equation": eq, "name": p, "estimate": m, "ci_low": lo, "ci_high": hi,
-                            "truth": float(truth[p]), "limit": limit[p], "seed": seed})
+                            "truth": float(truth[p]), "limit": limit[p], "seed": seed,
+                            "bias_est": biased[p] - _limit(model, names, mean)[p]})
     return out
 
 
@@ -164,13 +180,15 @@ def coverage(case: Case, structure: str | dict, n: int = 60, likelihood: str = "
 def summary(df: pd.DataFrame, by=("case", "structure", "likelihood")) -> pd.DataFrame:
     """Per group: intervals, coverage of the truth and of the noise-free limit (all parameters and the worst one),
     median interval width and median absolute error relative to the truth, the limit's bias in posterior sd
-    (median |limit - truth| / (interval width / 3.29), 3.29 = the width of a 90 % normal interval in sd), and
+    (median |limit - truth| / (interval width / 3.29), 3.29 = the width of a 90 % normal interval in sd), the
+    run's own estimate of it (``est_bias_sd``, from ``bias_est``), and
     ``sd_ratio``: the posterior sd (median interval width / 3.29) over the actual spread of the estimates over the
     datasets, the median over the parameters (1: calibrated; the spread of 60 estimates is known to +-9 %)."""
     z2 = 2.0 * stats.norm.ppf(0.95)
     d = df.assign(width=(df["ci_high"] - df["ci_low"]).abs() / df["truth"].abs(),
                   error=(df["estimate"] - df["truth"]).abs() / df["truth"].abs(),
-                  limit_bias_sd=(df["limit"] - df["truth"]).abs() / ((df["ci_high"] - df["ci_low"]).abs() / z2))
+                  limit_bias_sd=(df["limit"] - df["truth"]).abs() / ((df["ci_high"] - df["ci_low"]).abs() / z2),
+                  est_bias_sd=df["bias_est"].abs() / ((df["ci_high"] - df["ci_low"]).abs() / z2))
     g = d.groupby(list(by))
     keys = list(by) + ["name"]
     per = d.groupby(keys)[["covers_truth", "covers_limit"]].mean()
@@ -181,5 +199,5 @@ def summary(df: pd.DataFrame, by=("case", "structure", "likelihood")) -> pd.Data
         "cover_truth": g["covers_truth"].mean(), "worst_truth": per["covers_truth"].groupby(list(by)).min(),
         "cover_limit": g["covers_limit"].mean(), "worst_limit": per["covers_limit"].groupby(list(by)).min(),
         "median_rel_width": g["width"].median(), "median_rel_error": g["error"].median(),
-        "limit_bias_sd": g["limit_bias_sd"].median(),
+        "limit_bias_sd": g["limit_bias_sd"].median(), "est_bias_sd": g["est_bias_sd"].median(),
         "sd_ratio": spread.groupby(list(by)).median()}).reset_index()

@@ -83,7 +83,9 @@ PARAM_OPTIONAL = ("ci_low", "ci_high", "std", "vif", "selected",
                   # prior-anchored fits (estimator map, emcee with a prior): the prior and posterior sd / prior sd
                   "prior_mean", "prior_sd", "identifiability",
                   # the term's share of its equation and the error scaled by it (study.identify.fit.term_scales)
-                  "term_scale", "scaled_error")
+                  "term_scale", "scaled_error",
+                  # emcee's regression runs: the structure's truncation bias in posterior sd (study.identify.truncation)
+                  "truncation_bias_sd")
 #: Optional text keys of a params entry: how the truth was obtained ('exact', 'approximate', 'derived', ...).
 PARAM_TEXT = ("truth_kind",)
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import inspect
 import json
+import logging
 import time
 from dataclasses import dataclass, field
 
@@ -21,6 +22,8 @@ from .collinearity import collinearity
 from .estimators import make_estimator
 from .priors import prior_for
 from .structures import segments
+
+logger = logging.getLogger(__name__)
 
 #: interval reported from posterior draws (emcee): the central 90 %
 INTERVAL = (0.05, 0.95)
@@ -131,6 +134,8 @@ class Prepared:
     n_model: int
     collinearity: dict
     noise_operators: object = None  # the training rows' row_noise.RowOperators (prepare(..., operators=True))
+    row_map: object = None  # sparse (training rows x built rows): the post-processing's differencing, cleaning, split
+    dropped_differences: int = 0  # differenced rows dropped afterwards (cleaning, split): gaps in the chains
 
 
 def term_scales(model, records) -> dict:
@@ -174,13 +179,16 @@ def prepare(model, structure, records, candidates: int | None = None, seed: int 
         if candidates:
             Phi, names = _drop_duplicate_candidates(Phi, n_model, names + model.candidate_names_)
         post = structure.postprocess(Phi, y, seg, seed=seed)
+        # differenced rows then dropped leave gaps, so the differencing cannot be undone (study.identify.truncation)
+        dropped = (len(y) - len(np.unique(seg)) - post["rows"].shape[0]) if structure.difference else 0
         if len(post["y"]) < len(names):
             raise ValueError(f"equation {eq}: {len(post['y'])} rows after structure '{structure.name}' for "
                              f"{len(names)} unknowns")
         out[eq] = Prepared(pd.DataFrame(post["Phi"], columns=names), post["y"], post["Phi_test"], post["y_test"],
                            post["report"], n_model, collinearity(post["Phi"][:, :n_model]),
                            None if ops is None else RowOperators([(post["rows"] @ L).tocsr() for L in ops],
-                                                                 centred=bool(structure.center)))
+                                                                 centred=bool(structure.center)),
+                           post["rows"], int(max(dropped, 0)))
     return out
 
 
@@ -228,6 +236,7 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
         timings["regressors"] = time.perf_counter() - t0
         coefs, fit_time = {}, 0.0
         collin = {}
+        trunc_rows, bias_reg, dropped_diff = None, {}, 0  # emcee: its intervals' trust (study.identify.truncation)
         for eq, pr in prepared.items():
             names = list(pr.X.columns)
             n_model = pr.n_model
@@ -249,6 +258,11 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
             est.fit(X, post["y"], **_fit_kwargs(est.fit, progress, eq_prior, pr.noise_operators))
             fit_time += time.perf_counter() - t0
             coef = np.asarray(est.coef_, float).ravel()
+            if hasattr(est, "row_noise_") and getattr(est, "coef_std_", None) is not None:
+                if trunc_rows is None:
+                    trunc_rows = truncation_rows(model, structure, records) if not cand else {}
+                dropped_diff += pr.dropped_differences
+                bias_reg.update(truncation_bias(est, pr, trunc_rows.get(eq), coef, names))
             resid = post["y"] - X.to_numpy() @ coef - getattr(est, "intercept_", 0.0)
             metrics[f"fit_rmse_{eq}"] = float(np.sqrt(np.mean(resid ** 2)))
             sy = float(np.std(post["y"]))
@@ -285,6 +299,13 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
             phys_samples = model.physical(samples) if samples else {}
             coef_rows = [("N", n, physical[n], _sample_intervals(phys_samples.get(n)))
                          for n in model.physical_names["N"]]
+    bias_sd = {}
+    if not structure.simulates and trunc_rows is not None:  # an emcee regression run: can its intervals be trusted?
+        bias_sd = _bias_in_sd(model, coefs, bias_reg, coef_rows)
+        trusted, note = _trust_verdict(est, structure, bias_sd, dropped_diff, bool(trunc_rows))
+        metrics["intervals_trusted"], metrics["intervals_note"] = trusted, note
+        if not trusted:
+            logger.warning("intervals not trusted: %s", note)
     # parameter rows with truth and drift; each error also scaled by its term's weight in the equation
     scales = term_scales(model, records) if truth else {}
     params = []
@@ -293,6 +314,8 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
         kind = truth_kind if n in truth else "candidate (not in the truth model)"
         row = {"equation": eq, "name": n, "estimate": _num(v), "truth": _num(t if t is not None else 0.0),
                "truth_kind": kind, **{k: _num(x) for k, x in extra.items()}}
+        if n in bias_sd:
+            row["truncation_bias_sd"] = _num(bias_sd[n])
         if n in scales and n in truth and row["estimate"] is not None:
             row["term_scale"] = _num(scales[n])
             row["scaled_error"] = _num(abs(row["estimate"] - row["truth"]) * scales[n])
@@ -382,6 +405,57 @@ def build(vessel, model, records, structure) -> Regression:
         out.truth[eq] = [truth.get(c, np.nan) for c in m.equations[eq]]
         out.n_samples = int(len(y))
     return out
+
+
+def truncation_rows(model, structure, records) -> dict:
+    """Per equation ``(y_t, Phi_t)``: the truncation errors of the built rows' target and regressors
+    (``study.identify.truncation``), in the order of :func:`regression_rows`; empty where the structure has no
+    fixed stencil (the RTS smoother's states, r from the heading)."""
+    from .truncation import TruncationStructure
+
+    try:
+        rows = regression_rows(model, TruncationStructure(structure), records)
+    except ValueError:
+        return {}
+    return {eq: (y, Phi) for eq, (Phi, y, _) in rows.items()}
+
+
+def truncation_bias(est, pr, rows, coef, names) -> dict:
+    """{regression column: its estimated truncation bias} of one equation: the rows' truncation errors at the
+    estimate, through the post-processing's row map and the posterior's GLS map (``est.row_noise_``'s whitening;
+    least squares where the rows were not whitened)."""
+    from .truncation import coefficient_bias
+
+    if rows is None or pr.row_map is None or rows[1].shape[1] != len(coef):
+        return {}
+    y_t, Phi_t = rows
+    e = pr.row_map @ (y_t - Phi_t @ coef)
+    centred = bool(getattr(pr.noise_operators, "centred", False))
+    b = coefficient_bias(est.row_noise_, pr.X.to_numpy(), e, centred)
+    return dict(zip(names, map(float, b)))
+
+
+def _bias_in_sd(model, coefs: dict, bias: dict, coef_rows: list) -> dict:
+    """{reported parameter: estimated truncation bias / posterior sd}. Nomoto models report K, T, alpha: their
+    bias is the model's own map of the biased regression coefficients minus that of the estimate."""
+    sd = {n: extra.get("std") for _, n, _, extra in coef_rows}
+    if getattr(model, "type", None) == "nomoto" and bias:
+        own = {n: v for n, v in coefs.items() if n in _all(model.equations)}
+        ph, ph_b = model.physical(own), model.physical({n: v + bias.get(n, 0.0) for n, v in own.items()})
+        bias = {n: float(ph_b[n] - ph[n]) for n in ph}
+    return {n: (bias[n] / sd[n] if sd.get(n) else float("nan")) for n in bias if n in sd}
+
+
+def _trust_verdict(est, structure, bias_sd: dict, dropped_differences: int, stencil: bool) -> tuple[bool, str]:
+    """(trusted, note) of an emcee regression run's intervals (``study.identify.truncation.verdict``); the
+    independent-rows likelihood is not calibrated whatever the bias (its intervals 8-150 times the spread,
+    README)."""
+    from .truncation import verdict
+
+    if getattr(est, "likelihood", "regression") == "regression_iid" and getattr(est, "prior_sd_", None) is None:
+        return False, ("likelihood regression_iid counts the rows as independent: intervals not calibrated "
+                       "(8-150 times the actual spread measured); use likelihood regression")
+    return verdict(bias_sd if stencil else {}, structure.name, dropped_differences)
 
 
 def _all(eqs: dict) -> set:

@@ -317,10 +317,13 @@ class EmceeSampler(Estimator):
         X, y, names = as_arrays(X, y)
         n, k = X.shape
         self._init_outputs(k)
+        # the fitted row-noise model (its whitening is the posterior's GLS map; None: the rows as they are, least
+        # squares), kept so that the run can tell whether its intervals are trusted (study.identify.truncation)
+        self.row_noise_ = None
         if prior is not None:
             return self._fit_informative(X, y, names, prior, progress)
         if self.likelihood == "regression":
-            mean, cov, diag, _ = self.gaussian_regression(X, y, noise_operators)
+            mean, cov, diag, self.row_noise_ = self.gaussian_regression(X, y, noise_operators)
             self._sample_gaussian(mean, cov, names, progress)
             self.diagnostics_.update(diag)
             return self

@@ -44,10 +44,12 @@ class Case:
     name: str = ""
 
 
-def make_case(vessel: str, model: str, train: list, noise: str = "low", sample_dt: float | None = None,
+def make_case(vessel: str, model: str, train: list, noise: str = "low_relative", sample_dt: float | None = None,
               sample_dt_LU: float | None = None, sim: dict | None = None, name: str = "") -> Case:
     """The case of ``vessel`` (config name) identified with ``model`` from the ``train`` manoeuvres, measured with
-    the ``noise`` config (optionally resampled at ``sample_dt`` s or ``sample_dt_LU`` L/U0)."""
+    the ``noise`` config (optionally resampled at ``sample_dt`` s or ``sample_dt_LU`` L/U0). The default is 1 % of
+    each channel's RMS (``low_relative``), the noise the README's calibration table was measured with; the project's
+    default ``noise=low`` (absolute sensor noise) came later."""
     from .config import read_config
     from .identify.models import make_model
     from .pipeline import simulate_set, vessels_for

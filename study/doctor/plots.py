@@ -154,8 +154,8 @@ def residuals_time(res: list) -> bytes:
     if not res:
         _warn_box(axes[1], "no training segment")
     handles = _record_handles(res)
-    if handles:
-        fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 6), frameon=False,
+    if handles:  # records' names are about 27 characters: three columns fit the figure's width
+        fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 3), frameon=False,
                    title="training record")
     fig.suptitle("Residual forces and moment of the baseline model (inverse dynamics on the training records)")
     return _png(fig)
@@ -189,8 +189,8 @@ def residuals_states(res: list, states: tuple) -> bytes:
     if not states:
         _warn_box(axes[1, 0], "no state to plot against")
     handles = _record_handles(res, marker=True)
-    if handles:
-        fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 6), frameon=False,
+    if handles:  # three columns of record names fit the figure's width (six made it 15 in wide)
+        fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 3), frameon=False,
                    title="training record")
     fig.suptitle("Residual forces and moment of the baseline model against the states and inputs")
     return _png(fig)

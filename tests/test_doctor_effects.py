@@ -47,8 +47,9 @@ def test_every_effect_has_an_example():
 
 
 #: identified-hull cases of 55-70 s each on two cores, run with -m slow (their known-model cases run by default,
-#: and the current's identified-hull case stands for them), keeping the README's test command near 15 minutes
-SLOW_IDENTIFIED = {"shallow_water", "rudder_dynamics"}
+#: and the identified-hull cases of current, yaw_bias, rudder_interaction and hull_nonlinear stand for them),
+#: keeping the README's test command near 15 minutes
+SLOW_IDENTIFIED = {"shallow_water", "rudder_dynamics", "wind", "propeller_wake"}
 CASES = [pytest.param(e, ident, id=f"{e}-{'identified_hull' if ident else 'known'}",
                       marks=[pytest.mark.slow] if ident and e in SLOW_IDENTIFIED else [])
          for e in EFFECTS for ident in (False, True)]
@@ -72,16 +73,17 @@ def test_hidden_effect_is_found_first_halves_the_error_and_is_identified(effect,
     assert not bad, bad
 
 
-def test_a_validation_record_at_a_new_depth_is_predicted_at_its_own_depth():
+@pytest.mark.parametrize("identified", [False, pytest.param(True, marks=pytest.mark.slow)],
+                         ids=["known", "identified_hull"])  # identified: 60 s, -m slow (as its effect's case above)
+def test_a_validation_record_at_a_new_depth_is_predicted_at_its_own_depth(identified):
     """Training at h/T 2.2 and 1.8, validation at 1.4: shallow_water is named and each record's h/T (from its
     depth column) is the truth; with the identified hull too."""
     example = effect_config("shallow_water")["example"]
-    for identified in (False, True):
-        d, rep, _ = run_case("shallow_water", example, identified)
-        assert rep["missing_effect"] == "shallow_water", rep["verdict"]
-        h = rep["depths_h_T"]
-        assert h["validate_0_zigzag_20_10_port"] == pytest.approx(1.4, rel=1e-6)
-        assert h["train_1_zigzag_20_20"] == pytest.approx(1.8, rel=1e-6)
+    d, rep, _ = run_case("shallow_water", example, identified)
+    assert rep["missing_effect"] == "shallow_water", rep["verdict"]
+    h = rep["depths_h_T"]
+    assert h["validate_0_zigzag_20_10_port"] == pytest.approx(1.4, rel=1e-6)
+    assert h["train_1_zigzag_20_20"] == pytest.approx(1.8, rel=1e-6)
 
 
 def test_identified_hull_nothing_hidden_gives_no_effect():

@@ -137,6 +137,41 @@ def _run_sweep(cmd: list[str], cwd: Path, log: Path, name: str) -> int:
             _scancel(name)  # nothing of this test stays queued, whatever happened
 
 
+def _cancel_once_two_records_land(cmd: list[str], cwd: Path, log: Path, name: str, results: Path) -> int:
+    """Start the sweep, scancel its array once two records have landed, end the command; its exit status.
+
+    On a cluster with accounting (sacct) submitit sees the cancelled jobs and the command stops with an error;
+    without (the throw-away cluster) it cannot tell and waits: the researcher presses Ctrl-C (SIGINT here).
+    The clocks below are guards against a hung cluster (generous multiples of what the step takes), so that a
+    broken cluster fails the test instead of hanging CI; they time nothing."""
+    with open(log, "ab") as fh:
+        proc = subprocess.Popen(cmd, cwd=cwd, env=_env(), stdout=fh, stderr=subprocess.STDOUT)
+        try:
+            give_up = time.monotonic() + SWEEP_TIMEOUT
+            while len(_records(results)) < 2:
+                if proc.poll() is not None:
+                    pytest.fail(f"the sweep ended before any cancel:\n{_tail(log)}")
+                if time.monotonic() > give_up:
+                    pytest.fail(f"hung: no two records within {SWEEP_TIMEOUT} s:\n{_tail(log)}")
+                time.sleep(0.2)
+            _scancel(name)
+            give_up = time.monotonic() + 60
+            while _queued(name) and time.monotonic() < give_up:
+                time.sleep(0.5)
+            if _queued(name):
+                pytest.fail(f"jobs still queued a minute after scancel: {_queued(name)}")
+            try:
+                return proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                proc.send_signal(signal.SIGINT)
+                return _finish(proc, log, name, timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+            _scancel(name)
+
+
 def _check_tables(results: Path, records: dict[str, dict]) -> pd.DataFrame:
     runs = pd.read_parquet(results / "runs.parquet")
     params = pd.read_parquet(results / "params.parquet")
@@ -203,31 +238,7 @@ def test_cancelled_sweep_is_finished_by_the_same_command(cluster, tmp_path):
     cmd = _sweep_cmd(results, name, "estimator=ls,lssvm", "seed=0,1,2,3")
     n_runs = 8
 
-    with open(log, "ab") as fh:
-        proc = subprocess.Popen(cmd, cwd=work, env=_env(), stdout=fh, stderr=subprocess.STDOUT)
-        try:
-            deadline = time.monotonic() + SWEEP_TIMEOUT
-            while len(_records(results)) < 2:
-                assert proc.poll() is None, f"the sweep ended before any cancel:\n{_tail(log)}"
-                assert time.monotonic() < deadline, f"no two records within {SWEEP_TIMEOUT} s:\n{_tail(log)}"
-                time.sleep(0.2)
-            _scancel(name)
-            t_cancel = time.monotonic()
-            while _queued(name) and time.monotonic() - t_cancel < 60:
-                time.sleep(0.5)
-            assert not _queued(name), f"jobs still queued a minute after scancel: {_queued(name)}"
-            # On a cluster with accounting (sacct) submitit sees the cancelled jobs and the command stops with an
-            # error; without (the throw-away cluster) it cannot tell and waits: the researcher presses Ctrl-C.
-            try:
-                rc_first = proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                proc.send_signal(signal.SIGINT)
-                rc_first = _finish(proc, log, name, timeout=60)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
-            _scancel(name)
+    rc_first = _cancel_once_two_records_land(cmd, work, log, name, results)
     assert rc_first != 0, "a sweep whose jobs were cancelled must not end as a success"
 
     before = _records(results)
@@ -307,29 +318,7 @@ def test_grouped_cancelled_sweep_is_finished_by_the_same_command(cluster, tmp_pa
     cmd = _sweep_cmd(results, name, "estimator=ls,lssvm", "seed=0,1,2,3", "hydra.launcher.jobs_per_task=2",
                      launcher="slurm_grouped")
     n_runs = 8
-    with open(log, "ab") as fh:
-        proc = subprocess.Popen(cmd, cwd=work, env=_env(), stdout=fh, stderr=subprocess.STDOUT)
-        try:
-            deadline = time.monotonic() + SWEEP_TIMEOUT
-            while len(_records(results)) < 2:
-                assert proc.poll() is None, f"the sweep ended before any cancel:\n{_tail(log)}"
-                assert time.monotonic() < deadline, f"no two records within {SWEEP_TIMEOUT} s:\n{_tail(log)}"
-                time.sleep(0.2)
-            _scancel(name)
-            t_cancel = time.monotonic()
-            while _queued(name) and time.monotonic() - t_cancel < 60:
-                time.sleep(0.5)
-            assert not _queued(name), f"jobs still queued a minute after scancel: {_queued(name)}"
-            try:  # without accounting submitit cannot tell the tasks were cancelled: Ctrl-C, as a researcher
-                rc_first = proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                proc.send_signal(signal.SIGINT)
-                rc_first = _finish(proc, log, name, timeout=60)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
-            _scancel(name)
+    rc_first = _cancel_once_two_records_land(cmd, work, log, name, results)
     assert rc_first != 0, "a sweep whose tasks were cancelled must not end as a success"
     before = _records(results)
     assert 2 <= len(before) < n_runs, f"the cancel did not land half way: {len(before)} of {n_runs} records"

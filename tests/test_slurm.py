@@ -137,6 +137,12 @@ def _run_sweep(cmd: list[str], cwd: Path, log: Path, name: str) -> int:
             _scancel(name)  # nothing of this test stays queued, whatever happened
 
 
+def _sigint_default() -> None:
+    """In the sweep's process before Python starts: SIGINT back to its default, so that Python turns it into
+    KeyboardInterrupt (Ctrl-C). A process started in the background by a shell without job control (``cmd &`` in
+    a script, as CI may run this suite) inherits SIGINT ignored, and Python then never sees the Ctrl-C."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
 def _cancel_once_two_records_land(cmd: list[str], cwd: Path, log: Path, name: str, results: Path) -> int:
     """Start the sweep, scancel its array once two records have landed, end the command; its exit status.
 
@@ -145,7 +151,8 @@ def _cancel_once_two_records_land(cmd: list[str], cwd: Path, log: Path, name: st
     The clocks below are guards against a hung cluster (generous multiples of what the step takes), so that a
     broken cluster fails the test instead of hanging CI; they time nothing."""
     with open(log, "ab") as fh:
-        proc = subprocess.Popen(cmd, cwd=cwd, env=_env(), stdout=fh, stderr=subprocess.STDOUT)
+        proc = subprocess.Popen(cmd, cwd=cwd, env=_env(), stdout=fh, stderr=subprocess.STDOUT,
+                                preexec_fn=_sigint_default)
         try:
             give_up = time.monotonic() + SWEEP_TIMEOUT
             while len(_records(results)) < 2:

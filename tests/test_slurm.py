@@ -179,6 +179,14 @@ def _cancel_once_two_records_land(cmd: list[str], cwd: Path, log: Path, name: st
             _scancel(name)
 
 
+def _sweep_places(tmp_path: Path) -> tuple[str, Path, Path, Path]:
+    """A sweep's job name (unique: only this test's jobs are cancelled), its results folder (absolute: the jobs
+    resolve it on the compute node), the login folder it is launched from (created) and its log."""
+    work = tmp_path / "login"
+    work.mkdir()
+    return f"study-test-{uuid.uuid4().hex[:8]}", tmp_path / "shared" / "results", work, tmp_path / "sweep.log"
+
+
 def _check_tables(results: Path, records: dict[str, dict]) -> pd.DataFrame:
     runs = pd.read_parquet(results / "runs.parquet")
     params = pd.read_parquet(results / "params.parquet")
@@ -196,11 +204,7 @@ def test_sweep_lands_every_record_once_and_records_a_failing_job(cluster, tmp_pa
     at least two are needed). The four others finish ok, the two ridge runs are recorded as failed with the error,
     and the sweep ends with its count of failed runs (exit status 1) and the tables rebuilt from all six records. The sweep goes in batches of
     four (hydra.sweeper.max_batch_size, how a sweep larger than a site's MaxArraySize is submitted): two arrays."""
-    name = f"study-test-{uuid.uuid4().hex[:8]}"
-    results = tmp_path / "shared" / "results"  # absolute: the jobs resolve it on the compute node
-    work = tmp_path / "login"
-    work.mkdir()
-    log = tmp_path / "sweep.log"
+    name, results, work, log = _sweep_places(tmp_path)
     cmd = _sweep_cmd(results, name, "estimator=ls,lssvm,ridge", "seed=0,1", "+estimator_overrides.ridge.n_splits=1",
                      "hydra.sweeper.max_batch_size=4")
     rc = _run_sweep(cmd, work, log, name)
@@ -237,11 +241,7 @@ def test_cancelled_sweep_is_finished_by_the_same_command(cluster, tmp_path):
     """Eight jobs; once two records have landed the whole array is cancelled with scancel (jobs killed mid-run,
     others never started). The same command, run again, finishes the sweep: every record present once, and the
     runs finished before the cancel not run again (their records untouched)."""
-    name = f"study-test-{uuid.uuid4().hex[:8]}"
-    results = tmp_path / "shared" / "results"
-    work = tmp_path / "login"
-    work.mkdir()
-    log = tmp_path / "sweep.log"
+    name, results, work, log = _sweep_places(tmp_path)
     cmd = _sweep_cmd(results, name, "estimator=ls,lssvm", "seed=0,1,2,3")
     n_runs = 8
 
@@ -280,11 +280,7 @@ def test_grouped_sweep_lands_every_record_once_and_records_a_failing_job(cluster
     cross-validation fold fails) in two array tasks of three jobs, each task running its jobs on a pool of two
     worker processes. Every record lands once, the two ridge runs are recorded as failed while the four others
     finish ok, the sweep ends with its count of failed runs (exit status 1) and the tables are rebuilt."""
-    name = f"study-test-{uuid.uuid4().hex[:8]}"
-    results = tmp_path / "shared" / "results"
-    work = tmp_path / "login"
-    work.mkdir()
-    log = tmp_path / "sweep.log"
+    name, results, work, log = _sweep_places(tmp_path)
     cmd = _sweep_cmd(results, name, "estimator=ls,lssvm,ridge", "seed=0,1", "+estimator_overrides.ridge.n_splits=1",
                      "hydra.launcher.jobs_per_task=3", "hydra.launcher.cpus_per_task=2", launcher="slurm_grouped")
     rc = _run_sweep(cmd, work, log, name)
@@ -317,11 +313,7 @@ def test_grouped_cancelled_sweep_is_finished_by_the_same_command(cluster, tmp_pa
     """Eight jobs in four array tasks of two (one CPU each: the jobs run in the task's own process, one after the
     other); once two records have landed the array is cancelled. The same command finishes the sweep: every record
     once, and the runs finished before the cancel not run again."""
-    name = f"study-test-{uuid.uuid4().hex[:8]}"
-    results = tmp_path / "shared" / "results"
-    work = tmp_path / "login"
-    work.mkdir()
-    log = tmp_path / "sweep.log"
+    name, results, work, log = _sweep_places(tmp_path)
     cmd = _sweep_cmd(results, name, "estimator=ls,lssvm", "seed=0,1,2,3", "hydra.launcher.jobs_per_task=2",
                      launcher="slurm_grouped")
     n_runs = 8

@@ -7,8 +7,14 @@ Cases (1 % white noise on every channel, ``noise=low``; trajectories fixed, the 
   10/10 zigzag sampled every 0.1 s (the simulation step, 0.0048 L/U0); K, T, alpha;
 * ``kt_fine``: the same sampled every 0.02 s (simulation step 0.02 s), where euler's O(h) truncation is 5 times
   smaller;
+* ``kt_1s``: the same sampled every 1 s (0.048 L/U0), where central's truncation and the regressors' noise bias
+  the uncorrected posterior by about a sd together;
 * ``kvlcc2``: KVLCC2 (full scale) with its MMG hull model (17 coefficients, exact truth) from the default training
   manoeuvres at half length (10/10 and 20/20 zigzags, random rudder; 0.1 s).
+
+Likelihoods: ``regression`` (the default: the rows' noise modelled, their truncation and the regressors' noise
+removed, ``study.identify.row_errors``), ``regression (uncorrected)`` (``correct_rows: false``: the likelihood before
+the correction) and ``regression_iid``.
 
 Structures: euler, central, integral, smoothed, diff_center, and diff_center without seed 000's random 80/20 split
 and z-score cleaning (``diff_center_nosplit``: the differencing and centring alone). For each: coverage of the
@@ -16,7 +22,7 @@ truth and of the structure's noise-free limit by the 90 % intervals, the worst p
 and error relative to the truth, the limit's bias in posterior sd, and the posterior sd over the actual spread of
 the estimates.
 
-``python benchmarks/bench_regression_calibration.py [--n 60] [--cases kt,kt_fine,kvlcc2]`` prints one table and
+``python benchmarks/bench_regression_calibration.py [--n 60] [--cases kt,kt_fine,kt_1s,kvlcc2]`` prints one table and
 writes ``benchmarks/results/bench_regression_calibration.json``. Wall time with 60 datasets on this shared 2-core
 machine: kt and kt_fine 9 minutes, kvlcc2 33 minutes.
 """
@@ -38,19 +44,24 @@ from study.config import read_config  # noqa: E402
 
 DIFF_NOSPLIT = {**read_config("structure", "diff_center"), "name": "diff_center_nosplit", "split": {}, "clean": {}}
 STRUCTURES = ["euler", "central", "integral", "smoothed", "diff_center", DIFF_NOSPLIT]
+#: (likelihood, correct_rows) pairs: the default, the likelihood before the rows' errors were removed, independent rows
+ALL = (("regression", True), ("regression", False), ("regression_iid", True))
+CORRECTED = (("regression", True), ("regression", False))
 CASES = {
-    "kt": (dict(vessel="kt1_mariner", model="nomoto1_nl", train=["zigzag_10_10"]), STRUCTURES, cal.LIKELIHOODS),
+    "kt": (dict(vessel="kt1_mariner", model="nomoto1_nl", train=["zigzag_10_10"]), STRUCTURES, ALL),
     "kt_fine": (dict(vessel="kt1_mariner", model="nomoto1_nl", train=["zigzag_10_10"], sim={"dt": 0.02}),
-                ["euler", "central", DIFF_NOSPLIT], ("regression",)),
+                ["euler", "central", DIFF_NOSPLIT], CORRECTED),
+    "kt_1s": (dict(vessel="kt1_mariner", model="nomoto1_nl", train=["zigzag_10_10"], sample_dt=1.0),
+              ["euler", "central", "integral", "smoothed", "diff_center", DIFF_NOSPLIT], CORRECTED),
     "kvlcc2": (dict(vessel="kvlcc2", model="mmg_hull", train=["zigzag_10_10", "zigzag_20_20", "random_rudder"],
-                    sim={"duration_scale": 0.5}), STRUCTURES, cal.LIKELIHOODS),
+                    sim={"duration_scale": 0.5}), STRUCTURES, ALL),
 }
 
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=60, help="datasets per structure and likelihood")
-    ap.add_argument("--cases", default="kt,kt_fine,kvlcc2")
+    ap.add_argument("--cases", default="kt,kt_fine,kt_1s,kvlcc2")
     ap.add_argument("--out", default=str(ROOT / "benchmarks" / "results" / "bench_regression_calibration.json"))
     a = ap.parse_args(argv)
     pd.set_option("display.width", 250)
@@ -62,11 +73,11 @@ def main(argv=None):
         spec, structures, likelihoods = CASES[name]
         case = cal.make_case(name=name, **spec)
         for st in structures:
-            for lik in likelihoods:
+            for lik, correct in likelihoods:
                 t0 = time.perf_counter()
-                df = cal.coverage(case, st, n=a.n, likelihood=lik)
+                df = cal.coverage(case, st, n=a.n, likelihood=lik, correct=correct)
                 sname = st if isinstance(st, str) else st["name"]
-                timings[f"{name}/{sname}/{lik}"] = time.perf_counter() - t0
+                timings[f"{name}/{sname}/{df['likelihood'].iloc[0]}"] = time.perf_counter() - t0
                 s = cal.summary(df)
                 print(s.round(3).to_string(header=not rows), flush=True)
                 rows.append(s)

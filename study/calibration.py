@@ -118,12 +118,12 @@ class _Whitening:
 
 
 def dataset_intervals(case: Case, structure, seed: int, likelihood: str = "regression", level: float = 0.9,
-                      draws: int = 4000) -> list[dict]:
+                      draws: int = 4000, correct: bool = True) -> list[dict]:
     """One dataset: per reported parameter its estimate, interval, truth, the structure's noise-free limit and
     ``bias_est``, the truncation bias the run estimates from its own noisy records (``study.identify.truncation``;
     its aim: ``limit - truth``)."""
     from .identify.estimators.bayes import EmceeSampler
-    from .identify.fit import prepare, truncation_bias, truncation_rows
+    from .identify.fit import prepare, row_errors, truncation_bias, truncation_rows
 
     if likelihood not in LIKELIHOODS:
         raise ValueError(f"likelihood must be one of {LIKELIHOODS}, got {likelihood!r}")
@@ -132,9 +132,12 @@ def dataset_intervals(case: Case, structure, seed: int, likelihood: str = "regre
     noisy = prepare(model, structure, records(case, seed), seed=seed, operators=ops)
     clean = prepare(model, structure, records(case, seed, noise_free=True), seed=seed, operators=ops)
     truth = model.truth()[0]
-    est = EmceeSampler(interval=level)
+    est = EmceeSampler(interval=level, correct_rows=correct)
     rng = np.random.default_rng(seed)
     trunc = truncation_rows(model, structure, records(case, seed))  # estimated from the noisy records only
+    errs = row_errors(model, structure, records(case, seed), noisy, trunc, seed=seed) if ops and correct else {}
+    errs_clean = (row_errors(model, structure, records(case, seed, noise_free=True), clean, seed=seed, n_probes=0)
+                  if ops and correct else {})
     out = []
     for eq, pr in noisy.items():
         names = list(pr.X.columns)
@@ -142,9 +145,10 @@ def dataset_intervals(case: Case, structure, seed: int, likelihood: str = "regre
         Xc, yc = clean[eq].X.to_numpy(), clean[eq].y
         sd0 = est._default_prior_sd(X, y)
         if ops:
-            mean, cov, _, noise = est.gaussian_regression(X, y, pr.noise_operators)
+            mean, cov, _, noise = est.gaussian_regression(X, y, pr.noise_operators, errors=errs.get(eq))
             q = None if noise is None else noise.q_raw
-            lim = est.gaussian_regression(Xc, yc, clean[eq].noise_operators, q_raw=q, prior_sd=sd0)[0]
+            lim = est.gaussian_regression(Xc, yc, clean[eq].noise_operators, q_raw=q, prior_sd=sd0,
+                                          errors=errs_clean.get(eq))[0]
         else:
             mean, cov, s2 = _iid_posterior(X, y, sd0)
             lim = _iid_posterior(Xc, yc, sd0, s2)[0]
@@ -163,7 +167,7 @@ def dataset_intervals(case: Case, structure, seed: int, likelihood: str = "regre
 
 
 def coverage(case: Case, structure: str | dict, n: int = 60, likelihood: str = "regression", seed0: int = 1,
-             level: float = 0.9) -> pd.DataFrame:
+             level: float = 0.9, correct: bool = True) -> pd.DataFrame:
     """Intervals of ``n`` datasets (seeds ``seed0 .. seed0 + n - 1``), one row per dataset and parameter, with
     ``covers_truth``, ``covers_limit``."""
     from .identify.structures import make_structure
@@ -171,9 +175,10 @@ def coverage(case: Case, structure: str | dict, n: int = 60, likelihood: str = "
     st = make_structure(structure)
     rows = []
     for s in range(seed0, seed0 + n):
-        rows += dataset_intervals(case, st, s, likelihood, level)
+        rows += dataset_intervals(case, st, s, likelihood, level, correct=correct)
     df = pd.DataFrame(rows)
-    df["structure"], df["likelihood"], df["case"] = st.name, likelihood, case.name
+    df["structure"], df["case"] = st.name, case.name
+    df["likelihood"] = likelihood + ("" if correct or likelihood != "regression" else " (uncorrected)")
     df["covers_truth"] = (df["ci_low"] <= df["truth"]) & (df["truth"] <= df["ci_high"])
     df["covers_limit"] = (df["ci_low"] <= df["limit"]) & (df["limit"] <= df["ci_high"])
     return df

@@ -36,3 +36,16 @@ def test_runs_without_the_flag_are_not_run():
     (c,) = emcee_kt.trust_claim(p)
     assert c["verdict"] == "not run"
     assert emcee_kt._trust(np.nan) == "not said" and emcee_kt._trust(np.False_) == "not trusted"
+
+
+def test_the_uncorrected_regression_likelihood_is_its_own_row():
+    """Runs with ``correct_rows`` false, and regression runs made before the setting existed (NaN), are the
+    likelihood before the rows' errors were removed; the default and the other likelihoods keep their names."""
+    row = {"cfg_structure.name": "euler", emcee_kt.LIK: "regression"}
+    assert emcee_kt._likelihood({**row, emcee_kt.CORRECT: True}) == "regression"
+    assert emcee_kt._likelihood({**row, emcee_kt.CORRECT: False}) == "regression_uncorrected"
+    assert emcee_kt._likelihood({**row, emcee_kt.CORRECT: np.False_}) == "regression_uncorrected"
+    assert emcee_kt._likelihood({**row, emcee_kt.CORRECT: np.True_}) == "regression"
+    assert emcee_kt._likelihood({**row, emcee_kt.CORRECT: np.nan}) == "regression_uncorrected"
+    assert emcee_kt._likelihood({**row, emcee_kt.LIK: "regression_iid", emcee_kt.CORRECT: True}) == "regression_iid"
+    assert emcee_kt._likelihood({"cfg_structure.name": "output_error"}) == "output_error"

@@ -110,13 +110,15 @@ def _csv_bytes(df: pd.DataFrame) -> bytes:
     return df.to_csv(index=False, float_format="%.10g").encode("utf-8")
 
 
-def _fit_kwargs(fn, progress: bool, prior: dict | None = None, noise_operators=None) -> dict:
+def _fit_kwargs(fn, progress: bool, prior: dict | None = None, noise_operators=None, row_errors=None) -> dict:
     params = inspect.signature(fn).parameters
     out = {"progress": progress} if "progress" in params else {}
     if prior is not None and "prior" in params:
         out["prior"] = prior
     if noise_operators is not None and "noise_operators" in params:
         out["noise_operators"] = noise_operators
+    if row_errors is not None and "row_errors" in params:
+        out["row_errors"] = row_errors
     return out
 
 
@@ -230,13 +232,22 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
             metrics["prior_source"] = str(prior_cfg["source"])
             metrics["prior_is_truth"] = float(prior_cfg["source"] == "vessel" and bool(model.truth()[2]))
         # an estimator whose likelihood models the rows' noise (emcee) gets the structure's noise operators
-        wants_ops = bool(getattr(make_estimator(estimator_cfg), "uses_noise_operators", False)) and prior is None
+        est0 = make_estimator(estimator_cfg)
+        wants_ops = bool(getattr(est0, "uses_noise_operators", False)) and prior is None
         t0 = time.perf_counter()
         prepared = prepare(model, structure, records, candidates=cand, seed=seed, operators=wants_ops)
         timings["regressors"] = time.perf_counter() - t0
+        # ... and the rows' truncation and regressors' noise, removed by its likelihood (study.identify.row_errors)
+        errors, trunc_rows = {}, None
+        if wants_ops and getattr(est0, "uses_row_errors", False) and not cand:
+            t0 = time.perf_counter()
+            trunc_rows = truncation_rows(model, structure, records)
+            errors = row_errors(model, structure, records, prepared, trunc_rows, seed=seed,
+                                n_probes=int(getattr(est0, "n_probes", 16)))
+            timings["row_errors"] = time.perf_counter() - t0
         coefs, fit_time = {}, 0.0
         collin = {}
-        trunc_rows, bias_reg, dropped_diff = None, {}, 0  # emcee: its intervals' trust (study.identify.truncation)
+        bias_reg, dropped_diff = {}, 0  # emcee: its intervals' trust (study.identify.truncation)
         for eq, pr in prepared.items():
             names = list(pr.X.columns)
             n_model = pr.n_model
@@ -255,7 +266,7 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
             eq_prior = {n: prior[n] for n in names if n in prior} if prior is not None else None
             if eq_prior is not None and len(eq_prior) < len(names):
                 raise ValueError(f"equation {eq}: the prior has no value for {[n for n in names if n not in eq_prior]}")
-            est.fit(X, post["y"], **_fit_kwargs(est.fit, progress, eq_prior, pr.noise_operators))
+            est.fit(X, post["y"], **_fit_kwargs(est.fit, progress, eq_prior, pr.noise_operators, errors.get(eq)))
             fit_time += time.perf_counter() - t0
             coef = np.asarray(est.coef_, float).ravel()
             if hasattr(est, "row_noise_") and getattr(est, "coef_std_", None) is not None:
@@ -302,7 +313,9 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
     bias_sd = {}
     if not structure.simulates and trunc_rows is not None:  # an emcee regression run: can its intervals be trusted?
         bias_sd = _bias_in_sd(model, coefs, bias_reg, coef_rows)
-        trusted, note = _trust_verdict(est, structure, bias_sd, dropped_diff, bool(trunc_rows))
+        rel = [v for k, v in metrics.items() if k.startswith("est_") and k.endswith("_eiv_reliability_min")]
+        trusted, note = _trust_verdict(est, structure, bias_sd, dropped_diff, bool(trunc_rows), bool(errors),
+                                       min(rel) if rel else None)
         metrics["intervals_trusted"], metrics["intervals_note"] = trusted, note
         if not trusted:
             logger.warning("intervals not trusted: %s", note)
@@ -420,6 +433,46 @@ def truncation_rows(model, structure, records) -> dict:
     return {eq: (y, Phi) for eq, (Phi, y, _) in rows.items()}
 
 
+def row_errors(model, structure, records, prepared: dict, trunc_rows: dict | None = None, seed: int = 0,
+               n_probes: int = 16) -> dict:
+    """Per equation the :class:`study.identify.row_errors.RowErrors` of its training rows: their truncation errors
+    (:func:`truncation_rows` through the row map) and the probes of the regressors' noise (the records with fresh
+    noise at each channel's estimated level, built into rows like the records and taken through the same row map;
+    centred like the rows where the structure centres). ``n_probes`` 0: no probes (noise-free records). Each
+    probe's rows are built once for every equation."""
+    from .row_errors import RowErrors, noisy_copies
+
+    trunc = truncation_rows(model, structure, records) if trunc_rows is None else trunc_rows
+    eqs = {eq: pr for eq, pr in prepared.items() if pr.row_map is not None and pr.noise_operators is not None}
+
+    def mapper(pr):
+        R, centred = pr.row_map, bool(pr.noise_operators.centred)
+
+        def mapped(a):
+            a = R @ np.nan_to_num(a)
+            return a - a.mean(axis=0) if centred else a
+        return mapped
+
+    maps = {eq: mapper(pr) for eq, pr in eqs.items()}
+    sds, copies = noisy_copies(records, n_probes, seed)
+    # each probe's rows built once for every equation (building them costs 70 ms on an MMG hull)
+    store: dict = {eq: [] for eq in eqs}
+    if n_probes > 0 and eqs:
+        base = regression_rows(model, structure, records)
+        for recs in copies:
+            rows = regression_rows(model, structure, recs)
+            for eq in eqs:
+                (Phi, y, _), (Phi0, y0, _) = rows[eq], base[eq]
+                store[eq].append((maps[eq](Phi - Phi0), maps[eq](y - y0)))
+    out = {}
+    for eq, pr in eqs.items():
+        ty = tX = None
+        if eq in trunc and trunc[eq][1].shape[1] == pr.X.shape[1]:
+            ty, tX = maps[eq](trunc[eq][0]), maps[eq](trunc[eq][1])
+        out[eq] = RowErrors(ty, tX, (lambda eq=eq: iter(store[eq])) if n_probes > 0 else None, sds)
+    return out
+
+
 def truncation_bias(est, pr, rows, coef, names) -> dict:
     """{regression column: its estimated truncation bias} of one equation: the rows' truncation errors at the
     estimate, through the post-processing's row map and the posterior's GLS map (``est.row_noise_``'s whitening;
@@ -446,7 +499,8 @@ def _bias_in_sd(model, coefs: dict, bias: dict, coef_rows: list) -> dict:
     return {n: (bias[n] / sd[n] if sd.get(n) else float("nan")) for n in bias if n in sd}
 
 
-def _trust_verdict(est, structure, bias_sd: dict, dropped_differences: int, stencil: bool) -> tuple[bool, str]:
+def _trust_verdict(est, structure, bias_sd: dict, dropped_differences: int, stencil: bool, corrected: bool = False,
+                   reliability: float | None = None) -> tuple[bool, str]:
     """(trusted, note) of an emcee regression run's intervals (``study.identify.truncation.verdict``); the
     independent-rows likelihood is not calibrated whatever the bias (its intervals 8-150 times the spread,
     README)."""
@@ -455,7 +509,7 @@ def _trust_verdict(est, structure, bias_sd: dict, dropped_differences: int, sten
     if getattr(est, "likelihood", "regression") == "regression_iid" and getattr(est, "prior_sd_", None) is None:
         return False, ("likelihood regression_iid counts the rows as independent: intervals not calibrated "
                        "(8-150 times the actual spread measured); use likelihood regression")
-    return verdict(bias_sd if stencil else {}, structure.name, dropped_differences)
+    return verdict(bias_sd if stencil else {}, structure.name, dropped_differences, corrected, reliability)
 
 
 def _all(eqs: dict) -> set:

@@ -5,6 +5,8 @@ Why: emcee's regression likelihood (``study.identify.row_noise``) models the sam
 structure's truncation error is no sampling noise (a noise-free record has it too), so the posterior covers the
 structure's noise-free limit, not the truth. Measured on the KT Mariner (``study.calibration``): euler at 0.1 s is
 biased by 1.55 posterior sd and its 90 % intervals cover the truth 56 % of the time; at 0.02 s 0.8 sd and 89 %.
+The same row errors are what emcee's default likelihood subtracts (``study.identify.row_errors``); then the bias
+estimated here is what was removed, and the verdict asks whether the removal can be trusted.
 
 **The row error of truncation, from the structure's own stencil** (Taylor expansion about the row's time ``t_r``,
 ``Ops.times``): a derivative operator ``D_p`` (``Structure.noise_operators``, the exact stencil of the rows) applied
@@ -27,6 +29,12 @@ coefficients (the posterior median) times that of its regressors, carried throug
 whitening already fitted (``RowNoise``): ``bias = (X_w' X_w)^-1 X_w' e_w``, ``X_w = C^-1 X``, ``e_w = C^-1 e``
 (the weak default prior left out: it moves the posterior by far less than its sd). Expressed in posterior sd per
 reported parameter (Nomoto: K, T, alpha through the model's own map from the regression coefficients).
+
+**Where the likelihood removes the truncation and the regressors' noise** (``study.identify.row_errors``, emcee's
+default ``correct_rows``), the bias estimated here is what was removed: the run is trusted unless it exceeds
+``CORRECTED_LIMIT_SD`` (the estimate's own error, assumed at most 2.5 % of it, would then pass half a posterior sd)
+or the whitened regressors' reliability falls below ``RELIABILITY_MIN`` (their noise is then no small perturbation
+and a first-order correction does not hold: "cannot tell"). Otherwise (``correct_rows: false``):
 
 **The verdict**: not trusted when any reported parameter's estimated bias exceeds ``BIAS_LIMIT_SD`` = 1 posterior
 sd. A bias of b sd leaves a 90 % normal interval covering Phi(1.645 - b) - Phi(-1.645 - b): 74 % at b = 1, 54 %
@@ -55,6 +63,15 @@ TAYLOR_TERMS = 2
 SMOOTH_WINDOW_S = 3.0
 #: a reported parameter biased by more than this many posterior sd: the intervals are not trusted
 BIAS_LIMIT_SD = 1.0
+#: where the likelihood removed the truncation (study.identify.row_errors): the most it may remove and still be
+#: trusted. Assumption (labelled): the estimate is within 2.5 % of the actual bias, so what is left stays below half a
+#: posterior sd. Measured on the KT Mariner (study.calibration, noise-free limit minus truth after the correction):
+#: 0.01 sd left of 1.55 sd (euler, 0.1 s, 1 % noise), 0.1 of 4.8 (euler, 1 s), 0.02 of 8.5 (euler, 0.1 s, the
+#: standard training set with sensor noise, noise=low)
+CORRECTED_LIMIT_SD = 20.0
+#: the smallest reliability of the whitened regressors (1 - their noise's share of their spread) for which the
+#: first-order errors-in-variables correction is trusted (diff_center's differenced regressors at 0.1 s: below)
+RELIABILITY_MIN = 0.5
 
 
 def _moments(L: sp.spmatrix, t: np.ndarray, t_r: np.ndarray, s: int) -> np.ndarray:
@@ -148,18 +165,32 @@ def coefficient_bias(noise, X: np.ndarray, e: np.ndarray, centred: bool = False)
     return b[:k]
 
 
-def verdict(bias_sd: dict, structure_name: str, dropped_differences: int = 0) -> tuple[bool, str]:
-    """(trusted, one-line note) from the reported parameters' estimated biases in posterior sd and the rows
-    differenced then cut (see the module docstring)."""
+def verdict(bias_sd: dict, structure_name: str, dropped_differences: int = 0, corrected: bool = False,
+            reliability: float | None = None) -> tuple[bool, str]:
+    """(trusted, one-line note) from the reported parameters' estimated truncation biases in posterior sd, the
+    rows differenced then cut, and, where the likelihood removed the rows' errors (``corrected``,
+    ``study.identify.row_errors``), the smallest reliability of the whitened regressors (see the module
+    docstring)."""
     if dropped_differences:
         return False, (f"{structure_name}: {dropped_differences} differenced rows dropped (split/cleaning) leave "
                        "gaps, so the differencing cannot be undone and the regressors' noise biases the estimate: "
                        "intervals not calibrated; use euler/central/integral without split")
+    if corrected and reliability is not None and np.isfinite(reliability) and reliability < RELIABILITY_MIN:
+        return False, (f"{structure_name}: the regressors' noise is {1 - reliability:.0%} of their whitened spread "
+                       f"(reliability {reliability:.2f} < {RELIABILITY_MIN}): its first-order correction does not "
+                       "hold there; intervals not calibrated (cannot tell)")
     finite = {n: v for n, v in bias_sd.items() if v is not None and np.isfinite(v)}
     if not finite:
         return True, f"{structure_name}: truncation bias not estimated (no stencil); intervals as modelled"
     worst = max(finite, key=lambda n: abs(finite[n]))
     b = abs(finite[worst])
+    if corrected:
+        if b > CORRECTED_LIMIT_SD:
+            return False, (f"{structure_name} truncation of {b:.1f} posterior sd on {worst} removed, more than "
+                           f"{CORRECTED_LIMIT_SD:g} sd: its estimate's error may exceed half a sd; intervals not "
+                           "calibrated; sample finer or use central/integral")
+        return True, (f"{structure_name} truncation of at most {b:.2f} posterior sd ({worst}) and the regressors' "
+                      "noise removed: intervals trusted")
     if b > BIAS_LIMIT_SD:
         return False, (f"{structure_name} truncation biases {worst} by {b:.1f} posterior sd: intervals not "
                        "calibrated; sample finer or use central/integral")

@@ -26,13 +26,18 @@ SEED = None  # no seed paper's claim
 # noise on the outputs only: the absolute and the relative definition (the study pins the relative one)
 OUTPUTS_ONLY = ("low_outputs_relative", "low_outputs")
 LIK = "cfg_estimator.params.likelihood"
+CORRECT = "cfg_estimator.params.correct_rows"  # the rows' truncation and regressors' noise removed (row_errors)
 BAND = (0.80, 0.97)  # issue 11: 90 % intervals covering the truth 80-97 % of the time are calibrated
 
 
 def _likelihood(row) -> str:
     if row["cfg_structure.name"] == "output_error":
         return "output_error"
-    return str(row.get(LIK) or "regression_iid")  # runs made before the likelihood was a setting: iid
+    lik = str(row.get(LIK) or "regression_iid")  # runs made before the likelihood was a setting: iid
+    corrected = row.get(CORRECT)
+    if lik == "regression" and (corrected is None or pd.isna(corrected) or not bool(corrected)):
+        return "regression_uncorrected"  # correct_rows false, or a run made before the rows' errors were removed
+    return lik
 
 
 def coverage(p: pd.DataFrame) -> dict:
@@ -74,7 +79,7 @@ def build(b: Builder, runs, params, claims):
                      else (f"{sec.min():g}" if len(sec) else ""), "datasets": int(d["run_id"].nunique()),
                      **coverage(d)})
     cov = pd.DataFrame(rows)
-    order = {v: i for i, v in enumerate(["output_error", "regression", "regression_iid"])}
+    order = {v: i for i, v in enumerate(["output_error", "regression", "regression_uncorrected", "regression_iid"])}
     cov = cov.sort_values(["likelihood", "structure", "noise", "sample_dt_LU"],
                           key=lambda c: c.map(order) if c.name == "likelihood" else
                           (c.map({v: i for i, v in enumerate(STRUCTURE_ORDER)}) if c.name == "structure" else
@@ -131,8 +136,8 @@ def trust_claim(p: pd.DataFrame, b: Builder | None = None) -> list:
         return [{"seed": "(this harness)", "claim": text, "study": NAME, "verdict": "not run", "numbers": ""}]
     if b is not None:
         b.table(t, NAME, "trust", "emcee_kt: coverage of the regression likelihood's 90 % intervals split by the "
-                "run's own flag (m_intervals_trusted: no truncation bias above 1 posterior sd estimated from its "
-                "records; study/identify/truncation.py), per structure, noise and sampling interval",
+                "run's own flag (m_intervals_trusted, from its own records: study/identify/truncation.py), per "
+                "structure, noise and sampling interval",
                 floatfmt=".3g")
     reg = p[(p["likelihood"] == "regression") & (p["trusted"] != "not said")]
     per, lines = {}, []
@@ -174,8 +179,9 @@ def claim(cov: pd.DataFrame, b: Builder | None = None) -> list:
     for the record). Each at the finest sampling with noise on the outputs only, restated under the other set-ups."""
     texts = {"a": "emcee's 90 % intervals cover the truth about 90 % of the time when the output-error likelihood's "
                   "assumptions hold (noise on the outputs only)",
-             "b": "with the regression likelihood that models the rows' noise (study/identify/row_noise.py), emcee's "
-                  "90 % intervals cover the truth about 90 % of the time on every regression structure"}
+             "b": "with the regression likelihood that models the rows' noise and removes their truncation and the "
+                  "regressors' noise (study/identify/row_noise.py, row_errors.py), emcee's 90 % intervals cover the "
+                  "truth about 90 % of the time on every regression structure"}
     if not len(cov):
         return [{"seed": "(this harness)", "claim": t, "study": NAME, "verdict": "not run", "numbers": ""}
                 for t in texts.values()]
@@ -198,6 +204,11 @@ def claim(cov: pd.DataFrame, b: Builder | None = None) -> list:
         per[st] = settle(t)
         lines.append(f"{st}: {_line(t.iloc[0])}; " + "; ".join(
             f"{c['choice']}: {c['verdict']} ({100 * c['coverage']:.0f} %)" for _, c in t.iloc[1:].iterrows()))
+    raw = cov[cov["likelihood"] == "regression_uncorrected"]
+    if len(raw):  # the likelihood before the rows' errors were removed (correct_rows false), every set-up
+        lines.append("without removing the rows' errors (correct_rows false): " + "; ".join(
+            f"{c['structure']} at {c['sample_dt_LU']:g} L/U0, {c['noise']} {100 * c['coverage']:.0f} %"
+            for _, c in raw.iterrows()))
     iid = prim[prim["likelihood"] == "regression_iid"]
     if len(iid):
         lines.append("the iid likelihood for comparison: " + "; ".join(

@@ -10,19 +10,20 @@ Likelihoods (``likelihood``; the output-error one whenever the structure simulat
   covariance (``study.identify.row_noise``, which gives the reasons and sources). Gaussian, O(k^2) per walker.
   Without the structure's operators (rows given as bare ``X, y``, the RTS smoother, r from the heading) the rows
   are not whitened: least squares with the same block-robust covariance (the MAP estimator's model; on iid
-  rows with smooth regressors it covers 85 %). Measured over 60 datasets per structure, 1 % noise on every
-  channel, the rudder included (``benchmarks/bench_regression_calibration.py``; the slow test in
-  ``tests/test_regression_calibration.py``): the 90 % intervals cover the truth on central, integral and
-  smoothed rows 94-97 % of the time on the KT Mariner (first-order nonlinear Nomoto, K, T, alpha; 10/10 zigzag at
-  0.1 s; posterior sd 1.19 times the actual spread) and 84-85 % on KVLCC2's MMG hull (17 coefficients; 0.86-0.88
-  times). Not sampling noise, and not covered: euler's O(h) truncation (1.55 posterior sd on the KT at 0.1 s:
-  56 % of the truth, 95 % of the structure's noise-free limit; at 0.02 s 89 %); diff_center as seed 000 splits
-  and cleans it (11-44 %: the random hold-out leaves gaps in its chains of differences, so the differencing
-  cannot be undone, and the noise of its differenced regressors swamps them). Without the split and cleaning
-  the whitening undoes the differencing and centring: euler's posterior. The errors in the regressors leave
-  the intervals 1.2 times too wide on the KT at 0.1 s (1.06 at 0.02 s) and bias a few MMG coefficients by up
-  to about half a posterior sd (the worst covered 75-78 %); with the rows whitened they no longer bias the
-  estimate by hundreds of sd (least squares on euler rows).
+  rows with smooth regressors it covers 85 %). With ``correct_rows`` (the default) the rows' errors that are no
+  white noise of the target are removed first, both estimated from the run's own records
+  (``study.identify.row_errors``): the structure's truncation (its stencil's Taylor moments,
+  ``study.identify.truncation``) is subtracted from the rows, and the regressors' noise by corrected least squares
+  on the whitened rows (probed with noisy copies of the records). Measured over 60 datasets per structure, 1 %
+  noise on every channel, the rudder included (``benchmarks/bench_regression_calibration.py``; the slow test in
+  ``tests/test_regression_calibration.py``), the 90 % intervals cover the truth on the KT Mariner (first-order
+  nonlinear Nomoto, K, T, alpha; 10/10 zigzag) 93-96 % of the time at 0.1 s on euler, central, integral, smoothed
+  and diff_center without its split, 87-95 % at 1 s, 89 % on euler at 0.02 s (before the correction: euler 56 %
+  at 0.1 s, its O(h) truncation 1.55 posterior sd; central 70-78 % at 1 s over 20 datasets); on KVLCC2's MMG hull
+  (17 coefficients, 20 datasets) 89-91 %, the worst coefficient 80 %, posterior sd 1.02 times the actual spread.
+  Not covered: diff_center as seed 000 splits and cleans it (14 % at 0.1 s, 75 % at 1 s): the random hold-out
+  leaves gaps in its chains of differences, so the differencing cannot be undone, and its whitened regressors
+  are mostly noise (reliability 0.1-0.2 at 0.1 s); such a run says its intervals are not trusted.
 - **regression_iid**: y = X theta + e, e ~ N(0, sigma^2) independent per row, sigma inferred. Computed from the
   sufficient statistics in the centred form SS(theta) = SS_min + (theta - theta_LS)^T X^T X (theta - theta_LS).
   Right for white residuals only: on noisy records its posterior sd is 8-150 times the actual spread of the
@@ -125,6 +126,12 @@ class EmceeSampler(Estimator):
         Output error: where the walkers start. 'local' a Gauss-Newton fit from the problem's initial estimate;
         'de' differential evolution over the box first (global: a KT model's likelihood has distant local
         optima); 'auto' DE for up to 10 parameters, else local.
+    correct_rows : bool
+        'regression' likelihood: remove the rows' errors that are no white noise of the target, estimated from
+        the run's own records (``study.identify.row_errors``): the structure's truncation and the regressors'
+        noise (corrected least squares). ``study.identify.fit`` passes them as ``row_errors``.
+    n_probes : int
+        Noisy copies of the records the regressors' noise is measured with (``row_errors.N_PROBES``).
     """
 
     problem_types = frozenset({"regression", "output_error"})
@@ -132,8 +139,11 @@ class EmceeSampler(Estimator):
     def __init__(self, n_walkers: int | None = None, target_ess: int = 1000, max_steps: int = 20000,
                  check_every: int | None = None, min_steps: int | None = None, prior_scale: float = 10.0,
                  interval: float = 0.9, seed: int = 0, max_saved: int = 20000, min_tau_multiple: float = 50.0,
-                 moves: str = "auto", init: str = "auto", prior: dict | None = None, likelihood: str = "regression"):
+                 moves: str = "auto", init: str = "auto", prior: dict | None = None, likelihood: str = "regression",
+                 correct_rows: bool = True, n_probes: int = 16):
         self.likelihood = likelihood
+        self.correct_rows = correct_rows
+        self.n_probes = n_probes
         self.prior = prior  # {source, sd, offset}: an informative prior (study.identify.priors), see fit
         self.n_walkers = n_walkers
         self.target_ess = target_ess
@@ -271,6 +281,10 @@ class EmceeSampler(Estimator):
         if structure.simulates and self.likelihood == "regression_iid":
             return True, (f"likelihood 'regression_iid' is a regression likelihood; structure '{structure.name}' "
                           "simulates the model (its likelihood is the output error's, run with the default)")
+        if not self.correct_rows and (structure.simulates or self.likelihood != "regression"):
+            return True, ("correct_rows false changes the 'regression' likelihood alone; with "
+                          f"{'output error' if structure.simulates else repr(self.likelihood)} the run would repeat "
+                          "the default's under another id")
         return super().skip(model, structure)
 
     @property
@@ -283,11 +297,17 @@ class EmceeSampler(Estimator):
         rms = np.sqrt(np.mean(X ** 2, axis=0))
         return self.prior_scale * sd_y / np.where(rms > 0, rms, 1.0)
 
-    def gaussian_regression(self, X, y, noise_operators=None, q_raw=None, prior_sd=None):
+    @property
+    def uses_row_errors(self) -> bool:
+        """The rows' truncation and regressors' noise are corrected (``study.identify.row_errors``)."""
+        return self.likelihood == "regression" and bool(self.correct_rows)
+
+    def gaussian_regression(self, X, y, noise_operators=None, q_raw=None, prior_sd=None, errors=None):
         """(mean, covariance, diagnostics, noise model or None) of the coefficients' posterior under the
         'regression' likelihood and the default prior: what :meth:`fit` samples, in closed form (the calibration
         study uses it on many datasets and checks the sampler against it on a few). ``q_raw``, ``prior_sd``: a
-        noise mix and prior widths taken as given (the same likelihood on other rows, e.g. noise-free ones)."""
+        noise mix and prior widths taken as given (the same likelihood on other rows, e.g. noise-free ones);
+        ``errors``: the rows' errors to remove (``study.identify.row_errors.RowErrors``; with the operators only)."""
         from .prior import gaussian_posterior, gls_posterior
 
         X, y, _ = as_arrays(X, y)
@@ -300,18 +320,18 @@ class EmceeSampler(Estimator):
         failed = 0.0
         if noise_operators is not None:
             try:
-                return gls_posterior(X, y, noise_operators, np.zeros(k), sd0, q_raw=q_raw)
+                return gls_posterior(X, y, noise_operators, np.zeros(k), sd0, q_raw=q_raw, errors=errors)
             except (ValueError, linalg.LinAlgError):  # no usable noise mix: the rows as they are (recorded)
                 failed = 1.0
         mean, cov, diag = gaussian_posterior(X, y, np.zeros(k), sd0, widen=False)
         return mean, cov, {"whitened": 0.0, "whitening_failed": failed, "sigma": diag["sigma"],
                            "data_blocks": diag["data_blocks"]}, None
 
-    def fit(self, X, y, progress: bool = False, prior: dict | None = None, noise_operators=None):
+    def fit(self, X, y, progress: bool = False, prior: dict | None = None, noise_operators=None, row_errors=None):
         """Sample the posterior of ``y = X theta + e``. ``noise_operators``: the structure's, a
         ``study.identify.row_noise.RowOperators`` (``study.identify.fit`` passes it), used by the 'regression'
-        likelihood; ``prior``: an informative prior (then the MAP estimator's posterior is sampled, whatever the
-        likelihood)."""
+        likelihood, with ``row_errors`` (``study.identify.row_errors.RowErrors``) removed when ``correct_rows``;
+        ``prior``: an informative prior (then the MAP estimator's posterior is sampled, whatever the likelihood)."""
         if self.likelihood not in self.LIKELIHOODS:
             raise ValueError(f"emcee: likelihood must be one of {self.LIKELIHOODS}, got {self.likelihood!r}")
         X, y, names = as_arrays(X, y)
@@ -323,7 +343,8 @@ class EmceeSampler(Estimator):
         if prior is not None:
             return self._fit_informative(X, y, names, prior, progress)
         if self.likelihood == "regression":
-            mean, cov, diag, self.row_noise_ = self.gaussian_regression(X, y, noise_operators)
+            errors = row_errors if self.uses_row_errors else None
+            mean, cov, diag, self.row_noise_ = self.gaussian_regression(X, y, noise_operators, errors=errors)
             self._sample_gaussian(mean, cov, names, progress)
             self.diagnostics_.update(diag)
             return self

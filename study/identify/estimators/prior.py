@@ -152,8 +152,7 @@ def corrected_least_squares(Z: np.ndarray, y: np.ndarray, ls: np.ndarray, eiv, s
     n, k = Z.shape
     H = Z.T @ Z
     A = H - M
-    Hi = linalg.inv(linalg.sqrtm(H).real)
-    rel = float(np.min(np.linalg.eigvalsh(Hi @ A @ Hi)))
+    rel = float(linalg.eigvalsh(A, H)[0])  # the generalised eigenvalues of (A, H): those of H^-1/2 A H^-1/2
     diag = {"eiv_reliability_min": rel, "eiv_corrected": 0.0}
     if not rel > 0.05:  # the correction would invert a near-singular system: no correction (the run is flagged)
         return None, diag

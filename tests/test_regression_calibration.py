@@ -187,7 +187,7 @@ def test_regression_intervals_are_calibrated_per_structure(kt, kt_1s):
     70-78 %). diff_center's differencing and centring alone give euler's posterior (the whitening undoes them).
     Not here: diff_center as seed 000 cleans and splits it (a random 20 % of the differenced rows held out, rows
     with |z| > 3 dropped): the gaps leave the differencing impossible to undo and its whitened regressors are
-    mostly noise (reliability 0.1-0.2 at 0.1 s; 14 % covered; at 1 s 75 %, intervals 0.6 times the spread); its
+    mostly noise (reliability 0.1-0.2 at 0.1 s; 0 % covered; at 1 s 78 %, intervals 0.64 times the spread); its
     runs say they cannot be trusted (``test_a_run_says_whether_its_intervals_can_be_trusted``)."""
     nosplit = {**read_config("structure", "diff_center"), "name": "diff_center_nosplit", "split": {}, "clean": {}}
     fine = cal.make_case("kt1_mariner", "nomoto1_nl", ["zigzag_10_10"], sim={"dt": 0.02}, name="kt 0.02 s")
@@ -281,3 +281,20 @@ def test_correct_rows_false_is_a_run_only_where_it_changes_the_likelihood():
     assert skip and "repeat" in why and "regression_iid" in why
     skip, why = EmceeSampler(correct_rows=False).skip(None, oe)
     assert skip and "output error" in why
+
+
+def test_a_run_whose_regressors_are_mostly_noise_cannot_tell():
+    """Where the likelihood had to leave the regressors' noise in (reliability below ``RELIABILITY_MIN``: no
+    first-order correction holds), the run is not trusted whatever its truncation; with the correction made, a
+    removed truncation of a few sd is trusted and one beyond ``CORRECTED_LIMIT_SD`` is not."""
+    from study.identify.row_errors import RELIABILITY_MIN
+    from study.identify.truncation import CORRECTED_LIMIT_SD, verdict
+
+    ok, note = verdict({"K": 0.1}, "central", corrected=True, reliability=0.5 * RELIABILITY_MIN, eiv_refused=True)
+    assert not ok and "cannot tell" in note and "reliability" in note
+    ok, note = verdict({"K": 3.0}, "euler", corrected=True, reliability=0.99)
+    assert ok and "removed" in note
+    ok, note = verdict({"K": 1.5 * CORRECTED_LIMIT_SD}, "euler", corrected=True, reliability=0.99)
+    assert not ok and "removed" in note
+    ok, _ = verdict({"K": 3.0}, "euler")  # without the correction, 3 sd of bias is left in the estimate
+    assert not ok

@@ -33,8 +33,9 @@ reported parameter (Nomoto: K, T, alpha through the model's own map from the reg
 **Where the likelihood removes the truncation and the regressors' noise** (``study.identify.row_errors``, emcee's
 default ``correct_rows``), the bias estimated here is what was removed: the run is trusted unless it exceeds
 ``CORRECTED_LIMIT_SD`` (the estimate's own error, assumed at most 2.5 % of it, would then pass half a posterior sd)
-or the whitened regressors' reliability falls below ``RELIABILITY_MIN`` (their noise is then no small perturbation
-and a first-order correction does not hold: "cannot tell"). Otherwise (``correct_rows: false``):
+or the likelihood had to leave the regressors' noise in (their whitened reliability below
+``row_errors.RELIABILITY_MIN``: their noise is then no small perturbation and a first-order correction does not
+hold: "cannot tell"). Otherwise (``correct_rows: false``):
 
 **The verdict**: not trusted when any reported parameter's estimated bias exceeds ``BIAS_LIMIT_SD`` = 1 posterior
 sd. A bias of b sd leaves a 90 % normal interval covering Phi(1.645 - b) - Phi(-1.645 - b): 74 % at b = 1, 54 %
@@ -69,9 +70,7 @@ BIAS_LIMIT_SD = 1.0
 #: 0.01 sd left of 1.55 sd (euler, 0.1 s, 1 % noise), 0.1 of 4.8 (euler, 1 s), 0.02 of 8.5 (euler, 0.1 s, the
 #: standard training set with sensor noise, noise=low)
 CORRECTED_LIMIT_SD = 20.0
-#: the smallest reliability of the whitened regressors (1 - their noise's share of their spread) for which the
-#: first-order errors-in-variables correction is trusted (diff_center's differenced regressors at 0.1 s: below)
-RELIABILITY_MIN = 0.5
+
 
 
 def _moments(L: sp.spmatrix, t: np.ndarray, t_r: np.ndarray, s: int) -> np.ndarray:
@@ -166,19 +165,19 @@ def coefficient_bias(noise, X: np.ndarray, e: np.ndarray, centred: bool = False)
 
 
 def verdict(bias_sd: dict, structure_name: str, dropped_differences: int = 0, corrected: bool = False,
-            reliability: float | None = None) -> tuple[bool, str]:
+            reliability: float | None = None, eiv_refused: bool = False) -> tuple[bool, str]:
     """(trusted, one-line note) from the reported parameters' estimated truncation biases in posterior sd, the
     rows differenced then cut, and, where the likelihood removed the rows' errors (``corrected``,
-    ``study.identify.row_errors``), the smallest reliability of the whitened regressors (see the module
-    docstring)."""
+    ``study.identify.row_errors``), whether it had to leave the regressors' noise in (``eiv_refused``: their
+    smallest whitened ``reliability`` below ``row_errors.RELIABILITY_MIN``; see the module docstring)."""
     if dropped_differences:
         return False, (f"{structure_name}: {dropped_differences} differenced rows dropped (split/cleaning) leave "
                        "gaps, so the differencing cannot be undone and the regressors' noise biases the estimate: "
                        "intervals not calibrated; use euler/central/integral without split")
-    if corrected and reliability is not None and np.isfinite(reliability) and reliability < RELIABILITY_MIN:
-        return False, (f"{structure_name}: the regressors' noise is {1 - reliability:.0%} of their whitened spread "
-                       f"(reliability {reliability:.2f} < {RELIABILITY_MIN}): its first-order correction does not "
-                       "hold there; intervals not calibrated (cannot tell)")
+    if corrected and eiv_refused:
+        rel = "" if reliability is None or not np.isfinite(reliability) else f" (reliability {reliability:.2f})"
+        return False, (f"{structure_name}: the regressors' noise is too large a part of their whitened spread{rel} "
+                       "for a first-order correction: not removed; intervals not calibrated (cannot tell)")
     finite = {n: v for n, v in bias_sd.items() if v is not None and np.isfinite(v)}
     if not finite:
         return True, f"{structure_name}: truncation bias not estimated (no stencil); intervals as modelled"

@@ -21,7 +21,7 @@ Likelihoods (``likelihood``; the output-error one whenever the structure simulat
   and diff_center without its split, 87-95 % at 1 s, 89 % on euler at 0.02 s (before the correction: euler 56 %
   at 0.1 s, its O(h) truncation 1.55 posterior sd; central 70-78 % at 1 s over 20 datasets); on KVLCC2's MMG hull
   (17 coefficients, 20 datasets) 89-91 %, the worst coefficient 80 %, posterior sd 1.02 times the actual spread.
-  Not covered: diff_center as seed 000 splits and cleans it (14 % at 0.1 s, 75 % at 1 s): the random hold-out
+  Not covered: diff_center as seed 000 splits and cleans it (0-44 % at 0.1 s, 76-78 % at 1 s): the random hold-out
   leaves gaps in its chains of differences, so the differencing cannot be undone, and its whitened regressors
   are mostly noise (reliability 0.1-0.2 at 0.1 s); such a run says its intervals are not trusted.
 - **regression_iid**: y = X theta + e, e ~ N(0, sigma^2) independent per row, sigma inferred. Computed from the

@@ -147,14 +147,17 @@ def corrected_least_squares(Z: np.ndarray, y: np.ndarray, ls: np.ndarray, eiv, s
     least-squares sandwich: its residuals at the biased estimate carry the bias as a slow misfit, which the blocks
     count as correlated noise (measured on synthetic rows of reliability 0.86: 2.6 times the actual spread).
     ``eiv_reliability_min``: the smallest eigenvalue of ``H^-1/2 (H - M) H^-1/2`` (1: the regressors' noise
-    negligible; near 0 or below: the noise is the signal, and the first-order correction is no longer valid)."""
+    negligible; near 0 or below: the noise is the signal, and the first-order correction is no longer valid; below
+    ``row_errors.RELIABILITY_MIN`` it is not made: None)."""
+    from ..row_errors import RELIABILITY_MIN
+
     M, g = eiv.M / np.outer(s, s), eiv.g / s
     n, k = Z.shape
     H = Z.T @ Z
     A = H - M
     rel = float(linalg.eigvalsh(A, H)[0])  # the generalised eigenvalues of (A, H): those of H^-1/2 A H^-1/2
     diag = {"eiv_reliability_min": rel, "eiv_corrected": 0.0}
-    if not rel > 0.05:  # the correction would invert a near-singular system: no correction (the run is flagged)
+    if not rel >= RELIABILITY_MIN:  # the noise is no small perturbation: no correction (the run is flagged)
         return None, diag
     Ai = linalg.inv(A)
     theta = Ai @ (Z.T @ y - g)

@@ -149,15 +149,15 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     out = Path(args.out)
     names = args.only or list(EXAMPLES)
+    there = [f"{n}/{f}" for n in names for f in existing_report(out / n)]
+    if there and not args.overwrite:  # before any work, and before the data are looked for (whatever is missing)
+        raise OutputExistsError(f"--out {out}: already holds {', '.join(there[:3])}{' ...' if len(there) > 3 else ''}"
+                                "; refusing to overwrite them (--overwrite to overwrite them, or another --out)")
     if any(n != "simulated_current" for n in names):  # the real-data examples: say where the data were looked for
         from ..loaders import require_real_records
 
         for ds in ("esso_osaka", "kvlcc2_hsva"):
             require_real_records(ds)  # RealDataMissing (a FileNotFoundError): one line, exit 2 (study.cli)
-    there = [f"{n}/{f}" for n in names for f in existing_report(out / n)]
-    if there and not args.overwrite:  # before any work
-        raise OutputExistsError(f"--out {out}: already holds {', '.join(there[:3])}{' ...' if len(there) > 3 else ''}"
-                                "; refusing to overwrite them (--overwrite to overwrite them, or another --out)")
     out.mkdir(parents=True, exist_ok=True)
     lines = ["# The model doctor's worked examples", "", "Rebuilt by `python -m study.doctor.examples` (see its "
              "docstring for the data and the models); never edited by hand.", "",

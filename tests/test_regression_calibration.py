@@ -179,7 +179,7 @@ def test_emcee_samples_the_closed_form_posterior(kt):
 @pytest.mark.slow
 def test_regression_intervals_are_calibrated_per_structure(kt, kt_1s):
     """The statistical test: 60 noisy datasets per regression structure and sampling interval; 90 % intervals must
-    cover the truth 80-97 % of the time (all parameters; none below 75 %). 4 minutes on this 2-core machine.
+    cover the truth 80-97 % of the time (all parameters; none below 75 %). 2 min 36 s on this 2-core machine.
 
     Every structure at the simulation's 0.1 s (0.0048 L/U0) and at 1 s (0.048 L/U0), euler also at 0.02 s: the rows'
     truncation and the regressors' noise are removed by the likelihood (``study.identify.row_errors``; measured

@@ -243,7 +243,7 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
             t0 = time.perf_counter()
             trunc_rows = truncation_rows(model, structure, records)
             errors = row_errors(model, structure, records, prepared, trunc_rows, seed=seed,
-                                n_probes=int(getattr(est0, "n_probes", 16)))
+                                n_probes=getattr(est0, "n_probes", None))
             timings["row_errors"] = time.perf_counter() - t0
         coefs, fit_time = {}, 0.0
         collin = {}
@@ -435,13 +435,15 @@ def truncation_rows(model, structure, records) -> dict:
 
 
 def row_errors(model, structure, records, prepared: dict, trunc_rows: dict | None = None, seed: int = 0,
-               n_probes: int = 16) -> dict:
+               n_probes: int | None = None) -> dict:
     """Per equation the :class:`study.identify.row_errors.RowErrors` of its training rows: their truncation errors
     (:func:`truncation_rows` through the row map) and the probes of the regressors' noise (the records with fresh
     noise at each channel's estimated level, built into rows like the records and taken through the same row map;
-    centred like the rows where the structure centres). ``n_probes`` 0: no probes (noise-free records). Each
-    probe's rows are built once for every equation."""
-    from .row_errors import RowErrors, noisy_copies
+    centred like the rows where the structure centres). ``n_probes``: None ``row_errors.N_PROBES``, 0 no probes
+    (noise-free records). Each probe's rows are built once for every equation."""
+    from .row_errors import N_PROBES, RowErrors, noisy_copies
+
+    n_probes = N_PROBES if n_probes is None else int(n_probes)
 
     trunc = truncation_rows(model, structure, records) if trunc_rows is None else trunc_rows
     eqs = {eq: pr for eq, pr in prepared.items() if pr.row_map is not None and pr.noise_operators is not None}

@@ -79,6 +79,7 @@ import emcee
 import numpy as np
 from scipy import linalg
 
+from ..row_errors import N_PROBES
 from .base import Estimator, as_arrays
 
 
@@ -140,7 +141,7 @@ class EmceeSampler(Estimator):
                  check_every: int | None = None, min_steps: int | None = None, prior_scale: float = 10.0,
                  interval: float = 0.9, seed: int = 0, max_saved: int = 20000, min_tau_multiple: float = 50.0,
                  moves: str = "auto", init: str = "auto", prior: dict | None = None, likelihood: str = "regression",
-                 correct_rows: bool = True, n_probes: int = 16):
+                 correct_rows: bool = True, n_probes: int = N_PROBES):
         self.likelihood = likelihood
         self.correct_rows = correct_rows
         self.n_probes = n_probes

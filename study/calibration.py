@@ -129,14 +129,15 @@ def dataset_intervals(case: Case, structure, seed: int, likelihood: str = "regre
         raise ValueError(f"likelihood must be one of {LIKELIHOODS}, got {likelihood!r}")
     model = case.model
     ops = likelihood == "regression"
-    noisy = prepare(model, structure, records(case, seed), seed=seed, operators=ops)
-    clean = prepare(model, structure, records(case, seed, noise_free=True), seed=seed, operators=ops)
+    recs, recs_clean = records(case, seed), records(case, seed, noise_free=True)  # each measured once
+    noisy = prepare(model, structure, recs, seed=seed, operators=ops)
+    clean = prepare(model, structure, recs_clean, seed=seed, operators=ops)
     truth = model.truth()[0]
     est = EmceeSampler(interval=level, correct_rows=correct)
     rng = np.random.default_rng(seed)
-    trunc = truncation_rows(model, structure, records(case, seed))  # estimated from the noisy records only
-    errs = row_errors(model, structure, records(case, seed), noisy, trunc, seed=seed) if ops and correct else {}
-    errs_clean = (row_errors(model, structure, records(case, seed, noise_free=True), clean, seed=seed, n_probes=0)
+    trunc = truncation_rows(model, structure, recs)  # estimated from the noisy records only
+    errs = row_errors(model, structure, recs, noisy, trunc, seed=seed) if ops and correct else {}
+    errs_clean = (row_errors(model, structure, recs_clean, clean, seed=seed, n_probes=0)
                   if ops and correct else {})
     out = []
     for eq, pr in noisy.items():

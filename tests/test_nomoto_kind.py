@@ -14,6 +14,7 @@ import pytest
 from scipy import signal
 
 from study import metrics
+from simd_asm import packed_double_ops
 from study.maneuvers import get_maneuver
 from study.config import read_config
 from study.sim import initial_state, load_vessel, replay, run, simulate
@@ -231,9 +232,7 @@ def test_batch_loop_is_simd_code_and_the_flag_is_part_of_the_cache_key():
     features = llvm.get_host_cpu_features()
     if not features.get("avx2", False):
         pytest.skip("no AVX2 on this CPU")
-    asm = integrator("nomoto").run_loop_asm()
-    reg = "zmm" if features.get("avx512f", False) else "ymm"
-    ops = {ln.split()[0] for ln in asm.splitlines() if reg in ln and ln.split()[0].endswith("pd")}
+    ops = set(packed_double_ops(integrator("nomoto").run_loop_asm()))
     # the branch-free Nomoto model (both orders computed, one selected) in packed double precision
     assert "vdivpd" in ops and any(op.startswith("vfmadd") for op in ops), ops
 

@@ -7,7 +7,6 @@ varied; 165 metrics, 17 parameters, about 17 kB each), in a temp folder. Timed, 
 * ``tables``: build both tables from the records (what ``collect`` and ``show`` do), this version and the
   baseline version of ``study/results.py`` (read from git, ``--baseline``; default: the commit before);
 * ``collect``: this version, tables written (plus the crash-leftover scan);
-* ``migrate``: the scan the app runs before the first job, on a folder already canonical;
 * ``fingerprint``: the code fingerprint of one run, first call in a process and cached.
 
 ``python benchmarks/bench_results.py [--n 300 1000]`` writes ``benchmarks/results/bench_results.json``.
@@ -30,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from study import fingerprint  # noqa: E402
-from study import results as R  # noqa: E402
+from study import store as R  # noqa: E402
 
 BASELINE = "62b33f6"  # the commit before canonical run ids, code fingerprints and record checks
 
@@ -107,12 +106,11 @@ def main() -> None:
                 t_old = best(old_store.tables, args.repeat)
                 t_new = best(new_store.tables, args.repeat)
                 t_collect = best(new_store.collect, args.repeat)
-                t_migrate = best(new_store.migrate, args.repeat)
             row = {"records": n, "tables_baseline_s": t_old, "tables_s": t_new, "ratio": t_new / t_old,
-                   "collect_s": t_collect, "migrate_scan_s": t_migrate, "per_record_ms": 1000 * t_new / n}
+                   "collect_s": t_collect, "per_record_ms": 1000 * t_new / n}
             rows.append(row)
             print(f"{n:6d} records: tables {t_new:6.2f} s (baseline {t_old:6.2f} s, x{t_new / t_old:4.2f}); "
-                  f"collect {t_collect:6.2f} s; migrate scan {t_migrate:5.2f} s; {row['per_record_ms']:.2f} ms a record")
+                  f"collect {t_collect:6.2f} s; {row['per_record_ms']:.2f} ms a record")
         finally:
             shutil.rmtree(folder, ignore_errors=True)
     print(f"code fingerprint of a run: {1000 * fp_first:.0f} ms the first time in a process, "

@@ -6,7 +6,7 @@ each with its own run id, written into a fresh store of N records for N in ``--s
 * ``write``: one more record written by ``ResultStore.write`` (lock, atomic rename) into the folder of N;
 * ``status scan``: what the sweep's progress line did after every job before issue 13 (list the folder, read
   each record's first 256 bytes), and ``scan (seen)``: what it does now in a worker that has read the records
-  before (``study.app._folder_counts``: the listing, and only new or changed records read);
+  before (``ResultStore.status_counts``: the listing, and only new or changed records read);
 * ``collect``: ``ResultStore.collect()`` (parse every record, build and write both parquet tables), the step run
   at the end of every run and sweep.
 
@@ -26,8 +26,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from study.app import _folder_counts, _record_status  # noqa: E402
-from study.results import ResultStore, run_id  # noqa: E402
+from study.store import ResultStore, run_id  # noqa: E402
 
 
 def fill(store: ResultStore, sources: list[dict], n: int) -> None:
@@ -64,12 +63,12 @@ def main(argv=None):
             t0 = time.perf_counter()
             counts = {}
             for f in (store.root / "records").glob("*.json"):
-                st = _record_status(f)
+                st = ResultStore._peek_status(f)
                 counts[st] = counts.get(st, 0) + 1
             t_scan = time.perf_counter() - t0
-            _folder_counts(store.root / "records")  # a worker's first job reads every record once
+            store.status_counts()  # a worker's first job reads every record once
             t0 = time.perf_counter()
-            assert sum(_folder_counts(store.root / "records").values()) == n + 1
+            assert sum(store.status_counts().values()) == n + 1
             t_scan_seen = time.perf_counter() - t0
             t0 = time.perf_counter()
             runs, _ = store.collect()

@@ -22,7 +22,8 @@ from omegaconf import OmegaConf  # noqa: E402
 
 import study.app  # noqa: E402,F401  (registers the sweeper plugin, as the app does)
 from study.pipeline import run_study, study_config  # noqa: E402
-from study.results import ResultStore, run_guarded  # noqa: E402
+from study.executor import run_guarded  # noqa: E402
+from study.store import ResultStore  # noqa: E402
 
 
 def main(argv):

@@ -9,10 +9,8 @@ that cannot be written is refused before the first job (exit status 2), and a fa
 """
 from __future__ import annotations
 
-import json
 import logging
 import os
-import re
 import sys
 import warnings
 from pathlib import Path
@@ -56,20 +54,13 @@ class CollectResults(Callback):
     at the end of a run or of a whole sweep (a failure to do so exits with status 1, the records intact)."""
 
     def _check(self, config: DictConfig) -> None:
-        from .results import ResultsFolderError, ResultStore
+        from .store import ResultsFolderError, ResultStore
 
-        store = ResultStore(_results_dir(config))
         try:
-            store.check_writable()
+            ResultStore(_results_dir(config)).check_writable()
         except ResultsFolderError as e:
             print(f"study: error: {e}", file=sys.stderr, flush=True)
             sys.exit(2)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # malformed records are reported by the collect
-            moved = store.migrate()  # records named by an earlier version's run id: found by any spelling
-        if moved.get("migrated") or moved.get("duplicate"):
-            print(f"study: {moved.get('migrated', 0)} record(s) renamed to canonical run ids, "
-                  f"{moved.get('duplicate', 0)} duplicate(s) moved to records/superseded/", file=sys.stderr, flush=True)
 
     def on_run_start(self, config: DictConfig, **kwargs) -> None:
         from .cli import UsageError
@@ -87,7 +78,7 @@ class CollectResults(Callback):
         self._check(config)
 
     def _collect(self, config: DictConfig) -> None:
-        from .results import ResultStore
+        from .store import ResultStore
 
         root = _results_dir(config)
         store = ResultStore(root)
@@ -113,54 +104,21 @@ class CollectResults(Callback):
         self._collect(config)
 
 
-_STATUS = re.compile(rb'"status":\s*"(\w+)"')
-
-
-def _record_status(path: Path) -> str | None:
-    """A record's status from its first bytes (records are written run_id first, status second): parsing
-    every record after every job made a 1188-job sweep quadratic, 1-2 s a job by its thousandth record."""
-    try:
-        with open(path, "rb") as fh:
-            m = _STATUS.search(fh.read(256))
-        if m:
-            return m.group(1).decode()
-        return json.loads(path.read_text(encoding="utf-8")).get("status", "?")
-    except (OSError, ValueError):
-        return None
-
-
 #: the number of jobs of the running sweep, set by the sweeper before it launches them (an environment variable:
 #: jobs may run in other processes, which inherit it)
 SWEEP_JOBS_ENV = "STUDY_SWEEP_JOBS"
 
-
-_SEEN: dict = {}  # record file name -> (inode, status): what this worker process has read already
+_STORES: dict = {}  # results folder -> its store in this worker process (it remembers the records it has read)
 
 
 def _folder_counts(root: Path) -> dict:
-    """Runs in the records folder by status. A worker reads only the records it has not seen (or that were
-    replaced since: a failed run rerun; the store writes a record to a temporary file and renames it), from the
-    folder's listing: reading every record after every job cost O(records)
-    file opens per job (2.5 s at 30,000 records; ``benchmarks/bench_store.py``), a joblib worker now reads each
-    record once per sweep."""
-    counts, names = {}, set()
-    if not root.is_dir():
-        return counts
-    for e in os.scandir(root):
-        if not e.name.endswith(".json"):
-            continue
-        names.add(e.name)
-        key = e.inode()  # from the listing itself (no stat); a rewritten record is a new file (atomic rename)
-        seen = _SEEN.get(e.name)
-        if seen is None or seen[0] != key:
-            status = _record_status(Path(e.path))
-            if status is None:
-                continue
-            seen = _SEEN[e.name] = (key, status)
-        counts[seen[1]] = counts.get(seen[1], 0) + 1
-    for gone in set(_SEEN) - names:
-        del _SEEN[gone]
-    return counts
+    """Runs in the results folder by status (``ResultStore.status_counts``: each record read once per worker)."""
+    from .store import ResultStore
+
+    store = _STORES.get(root)
+    if store is None:
+        store = _STORES[root] = ResultStore(root)
+    return store.status_counts()
 
 
 class SweepProgress(Callback):
@@ -181,10 +139,13 @@ class SweepProgress(Callback):
         rec = job_return.return_value if job_return is not None and job_return.status.name == "COMPLETED" else None
         status_ = rec.get("status", "?") if isinstance(rec, dict) else "error"
         wall = (rec.get("timings") or {}).get("wall") if isinstance(rec, dict) else None
-        counts = _folder_counts(_results_dir(config) / "records")
+        counts = _folder_counts(_results_dir(config))
         took = f", {wall:.1f} s" if isinstance(wall, (int, float)) else ""
         resumed = " (resumed)" if isinstance(rec, dict) and rec.get("resumed") else ""
         why = f" ({_reason(rec)})" if status_ == "skipped" and not resumed else ""
+        reps = rec.get("replicates") if isinstance(rec, dict) else None
+        if isinstance(reps, dict):  # a job of many datasets: its replicates by status
+            why += f" ({sum(reps.values())} replicates: " + ", ".join(f"{v} {k}" for k, v in sorted(reps.items())) + ")"
         total = os.environ.get(SWEEP_JOBS_ENV, "").strip()
         # one write of the whole line: workers share the stdout, and print() writes the text and its newline
         # apart (two workers' lines were seen joined on one line)
@@ -210,24 +171,43 @@ def main(cfg: DictConfig) -> dict | None:
 
 
 def _run(cfg: DictConfig) -> dict:
-    from .pipeline import run_study, study_config
     from .cli import ConfigError
-    from .results import RESUME_MODES, ResultStore, run_guarded
+    from .executor import RESUME_MODES, run_guarded, run_replicated
+    from .pipeline import SimulatedJob, run_study, study_config
     from .settings import check_run
+    from .store import ResultStore
 
     conf = OmegaConf.to_container(cfg, resolve=True)
     check_run(conf)  # a setting that makes no sense is refused before anything is simulated or written
     resume = conf.get("resume") or "code"
     if resume not in RESUME_MODES:
         raise ConfigError(f"resume={resume}: expected one of {', '.join(RESUME_MODES)}")
+    n = int(conf.get("replicates", 1))
     # a run on the user's files (train=...): read, checksum and check them before anything is written
     run_conf, data = study_config(conf)
+    run_conf.pop("replicates", None)  # how many datasets a job draws is no part of any one dataset's run
     store = ResultStore(_results_dir(cfg))
+    seed, force = int(conf.get("seed", 0)), bool(conf.get("force", False))
     # in a sweep, a run another live process is computing (an overlapping sweep) is left to it; a single run waits
-    record = run_guarded(store, run_conf, lambda: run_study(conf, data=data), seed=int(conf.get("seed", 0)),
-                         force=bool(conf.get("force", False)), resume=resume, wait=not _in_sweep())
+    if data is not None:
+        records = [run_guarded(store, run_conf, lambda: run_study(conf, data=data), seed=seed, force=force,
+                               resume=resume, wait=not _in_sweep())]
+    else:
+        records = run_replicated(store, run_conf, SimulatedJob(conf), n, seed, force=force, resume=resume,
+                                 wait=not _in_sweep())
+    for record in records:
+        _say_run(record, store)
+    failed = [r for r in records if r.get("status") == "failed"]
+    if failed and not _in_sweep():  # a sweep goes on; it ends with its count of failed runs (sweep_finished)
+        fail(EXIT_FAILED)
+    return records[0] if n == 1 else _job_summary(records)
+
+
+def _say_run(record: dict, store) -> None:
     status = record.get("status")
-    msg = f"run {record['run_id']}: {status}" + (" (already finished, resumed)" if record.get("resumed") else "")
+    rep = record.get("replicate")
+    msg = f"run {record['run_id']}" + (f" (replicate {rep})" if rep else "") + f": {status}" + \
+        (" (already finished, resumed)" if record.get("resumed") else "")
     if status == "claimed":
         by = record.get("claimed_by") or {}
         msg += f" (being computed by process {by.get('pid', '?')} on {by.get('host', '?')}; left to it)"
@@ -238,9 +218,18 @@ def _run(cfg: DictConfig) -> dict:
         print(f"study: error: run {record['run_id']} failed: {_reason(record)} (the traceback: "
               f"{store.root / 'records'}/{record['run_id']}.json, or python -m study.results show)",
               file=sys.stderr, flush=True)
-        if not _in_sweep():  # a sweep goes on; it ends with its count of failed runs (sweep_finished)
-            fail(EXIT_FAILED)
-    return record
+
+
+def _job_summary(records: list) -> dict:
+    """What a job of many replicates returns to the sweep: its worst status, counts by status, total time."""
+    counts: dict = {}
+    for r in records:
+        counts[r.get("status", "?")] = counts.get(r.get("status", "?"), 0) + 1
+    status = next((s for s in ("failed", "claimed", "ok", "skipped") if s in counts), "?")
+    first_bad = next((r for r in records if r.get("status") == status), records[0])
+    wall = sum(float((r.get("timings") or {}).get("wall") or 0.0) for r in records if not r.get("resumed"))
+    return {"run_id": records[0]["run_id"], "status": status, "error": first_bad.get("error"),
+            "replicates": counts, "timings": {"wall": wall}, "resumed": all(r.get("resumed") for r in records)}
 
 
 def _reason(record: dict) -> str:

@@ -15,7 +15,8 @@ from omegaconf import OmegaConf
 from study.app import CONF_DIR
 from study.identify.estimators import list_estimators, make_estimator
 from study.pipeline import run_study
-from study.results import ResultStore, run_guarded
+from study.executor import run_guarded
+from study.store import ResultStore
 
 FAST = {"emcee": ["estimator.params.target_ess=150", "estimator.params.min_tau_multiple=10",
                   "estimator.params.max_steps=3000", "estimator.params.init=local"],

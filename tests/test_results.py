@@ -12,8 +12,9 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from study.results import (NON_SCIENTIFIC_KEYS, ResultsFolderError, ResultStore, legacy_run_id, provenance,
-                           read_table, run_guarded, run_id, validate_record)
+from study.executor import run_guarded
+from study.store import (NON_SCIENTIFIC_KEYS, ResultsFolderError, ResultStore, provenance, read_table, run_id,
+                         validate_record)
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -60,7 +61,7 @@ def test_run_id_stable_and_scientific():
     assert run_id(_conf(noise={"name": "low", "level": 0.02})) != run_id(a)
     assert run_id(_conf(maneuvers={"train": ["zz20", "zz10"]})) != run_id(a)
     # and it is the same in another process (no hash randomisation)
-    code = ("import json,sys; from study.results import run_id; "
+    code = ("import json,sys; from study.store import run_id; "
             "print(run_id(json.loads(sys.argv[1])))")
     out = subprocess.run([sys.executable, "-c", code, json.dumps(a)], capture_output=True, text=True, cwd=REPO)
     assert out.stdout.strip() == run_id(a), out.stderr
@@ -451,7 +452,7 @@ def test_rebuild_never_replaces_a_table_with_an_empty_one(tmp_path):
 
 def _crash_while_writing(root, rid, ready):
     """A writer that dies mid-run: it holds the run's claim and has a temp record and table half written."""
-    from study.results import _tmp_path
+    from study.store.files import tmp_path as _tmp_path
 
     store = ResultStore(root)
     claim = store.claim(rid)
@@ -464,7 +465,7 @@ def _crash_while_writing(root, rid, ready):
 
 
 def test_crash_leftovers_are_reported_and_cleaned_and_a_dead_claim_is_recovered(tmp_path):
-    from study.results import _tmp_path
+    from study.store.files import tmp_path as _tmp_path
 
     root = tmp_path / "res"
     store = ResultStore(root)
@@ -601,7 +602,6 @@ def test_run_id_does_not_depend_on_how_numbers_are_spelt():
             _conf(noise={"name": "none", "level": np.int64(0)}, sim={"duration_scale": 1.0}, seed=0.0)]
     for c in same:
         assert run_id(c) == run_id(base)
-    assert legacy_run_id(same[0]) != legacy_run_id(base)  # what the old rule made of them
     # different science, or not a number, stays different
     for c in (_conf(noise={"name": "none", "level": 1e-12}, sim={"duration_scale": 1.0}),
               _conf(noise={"name": "none", "level": "0.0"}, sim={"duration_scale": 1.0}),
@@ -620,58 +620,13 @@ def test_run_id_of_composed_spellings_and_explicit_defaults():
     spellings = [["noise=none"], ["noise=none", "noise.level=0"], ["noise=none", "noise.level=0.0"],
                  ["noise=none", "sim.duration_scale=1"], ["noise=none", "depth=deep", "depth.formula=kijima_1990"],
                  ["noise=none", "vessel.particulars.Lpp=320", "seed=0", "estimator.params.rcond=null"]]
-    ids, legacy = set(), set()
+    ids = set()
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         for ov in spellings:
             conf = OmegaConf.to_container(compose(config_name="config", overrides=ov), resolve=True)
             ids.add(run_id(conf))
-            legacy.add(legacy_run_id(conf))
         other = OmegaConf.to_container(compose(config_name="config", overrides=["noise=low"]), resolve=True)
     assert len(ids) == 1 and run_id(other) not in ids
-    assert len(legacy) == 4  # under the old rule: four ids (and four computations) of one configuration
-
-
-def test_records_under_old_run_ids_are_found_and_migrated(tmp_path):
-    store = ResultStore(tmp_path)
-    conf = _conf(noise={"name": "none", "level": 0})  # spelt as an int, as `noise.level=0` gives
-    old = legacy_run_id(conf)
-    assert old != run_id(conf)
-    rec = _record(conf, run_id=old)
-    _write_raw(store, f"{old}.json", rec)
-    (store.artefact_dir(old)).mkdir(parents=True)
-    (store.artefact_dir(old) / "trace.csv").write_text("t\n")
-    # the table shows it (a legacy name is valid) and says it can be migrated
-    runs, _ = store.collect()
-    assert list(runs["run_id"]) == [old] and len(store.report.legacy) == 1
-    # a resume of that configuration finds it, renames it and its artefacts, and reuses it
-    calls = []
-    again = run_guarded(store, conf, lambda: calls.append(1) or _result(), seed=0, resume="config")
-    assert again["resumed"] and not calls and again["run_id"] == run_id(conf) and again["migrated_from"] == [old]
-    assert not store.record_path(old).exists() and not store.artefact_dir(old).exists()
-    assert (store.artefact_dir(run_id(conf)) / "trace.csv").read_text() == "t\n"
-    # two old spellings of one configuration: one row; `migrate` (the app runs it before the first job) keeps
-    # one record and sets the other aside
-    c_int = _conf(seed=5, noise={"name": "none", "level": 0})
-    c_float = _conf(seed=5, noise={"name": "none", "level": 0.0})
-    _write_raw(store, f"{legacy_run_id(c_int)}.json",
-               _record(c_int, run_id=legacy_run_id(c_int), finished="2024-01-01T00:00:02+00:00"))
-    _write_raw(store, f"{legacy_run_id(c_float)}.json",
-               _record(c_float, run_id=legacy_run_id(c_float), status="failed", error="boom"))
-    with pytest.warns(RuntimeWarning, match="same configuration"):
-        runs, _ = store.collect()
-    assert len(runs) == 2 and len(store.report.duplicates) == 1
-    assert legacy_run_id(c_int) in set(runs["run_id"])  # the finished one is kept
-    p = _cli("migrate", "--root", str(tmp_path), cwd=tmp_path)
-    assert p.returncode == 0, p.stderr
-    assert "1 record(s) renamed" in p.stdout and "1 duplicate(s)" in p.stdout
-    recs = sorted(store.records_dir.glob("*.json"))
-    assert {r.stem for r in recs} == {run_id(conf), run_id(c_int)}
-    assert json.loads(store.record_path(run_id(c_int)).read_text())["status"] == "ok"
-    assert len(list(store.superseded_dir.glob("*.json"))) == 1
-    runs, _ = store.collect()
-    assert len(runs) == 2 and not store.report.legacy and not store.report.duplicates
-    # a migration is idempotent
-    assert store.migrate() == {"current": 2}
 
 
 # --------------------------------------------------------------------------------------- resume knows the code
@@ -754,7 +709,7 @@ def test_fingerprint_follows_the_source_of_the_components_a_run_uses(tmp_path, m
         files = before[""]["files"]
         assert "study/identify/estimators/linear.py" in files and "study/sim/mmg.py" in files
         assert "study/identify/estimators/svr.py" not in files and "study/sim/abkowitz.py" not in files
-        assert "study/results.py" not in files and not any(f.startswith("study/figures") for f in files)
+        assert not any(f.startswith(("study/store", "study/executor", "study/figures")) for f in files)
         assert "conf/maneuver/zigzag_10_10.yaml" in files  # read by name at run time
         assert any(f.startswith("study/identify/effects/") for f in before["model.effects=[current]"]["files"])
         assert not any(f.startswith(("study/doctor", "study/identify/effects/", "study/identify/with_effects"))
@@ -781,7 +736,7 @@ def test_fingerprint_follows_the_source_of_the_components_a_run_uses(tmp_path, m
         edit("study/identify/models.py", "\n# a fix\n")  # what is identified: the model, and the pipeline imports it
         after4 = fps()
         assert fingerprint.changed_components(after3[""], after4[""]) == ["model", "pipeline"]
-        edit("study/results.py", "\n# not part of any run\n")
+        edit("study/store/store.py", "\n# not part of any run\n")
         assert fps() == after4
         # line endings do not matter (a Windows checkout), contents do
         mmg = copy / "study/sim/mmg.py"

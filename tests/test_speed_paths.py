@@ -121,23 +121,30 @@ def test_laplace_moves_sample_the_seed000_output_error_posterior():
 
 
 def test_sweep_progress_counts_follow_the_folder(tmp_path):
-    """The progress line's counts read each record once per worker, yet follow new, changed and removed ones."""
+    """The progress line's counts read each record once per worker, yet follow new, changed and removed ones; a
+    record whose status is no word is counted as malformed (the progress goes on)."""
     import json
     import os
 
-    from study.app import _folder_counts
+    from study.store import ResultStore
+
+    store = ResultStore(tmp_path)
+    (tmp_path / "records").mkdir()
+    _folder_counts = lambda _: store.status_counts()  # noqa: E731
 
     def put(name, status):  # as the store writes: a temporary file renamed over the record
-        tmp = tmp_path / f".{name}.tmp"
+        tmp = tmp_path / "records" / f".{name}.tmp"
         tmp.write_text(json.dumps({"run_id": name, "status": status}))
-        os.replace(tmp, tmp_path / f"{name}.json")
+        os.replace(tmp, tmp_path / "records" / f"{name}.json")
 
     put("a", "ok")
     put("b", "failed")
-    (tmp_path / "notes.txt").write_text("x")
+    (tmp_path / "records" / "notes.txt").write_text("x")
     assert _folder_counts(tmp_path) == {"ok": 1, "failed": 1}
     put("b", "ok")  # a failed run rerun
     put("c", "skipped")
     assert _folder_counts(tmp_path) == {"ok": 2, "skipped": 1}
-    (tmp_path / "a.json").unlink()
+    (tmp_path / "records" / "a.json").unlink()
     assert _folder_counts(tmp_path) == {"ok": 1, "skipped": 1}
+    put("d", 5)
+    assert _folder_counts(tmp_path) == {"ok": 1, "skipped": 1, "malformed": 1}

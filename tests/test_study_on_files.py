@@ -22,7 +22,8 @@ from omegaconf import OmegaConf
 from study.app import CONF_DIR
 from study.pipeline import run_study, study_config
 from study.records_run import FILE_KEYS, RecordsInputError
-from study.results import ResultStore, run_guarded, run_id
+from study.executor import run_guarded
+from study.store import ResultStore, run_id
 
 REPO = Path(__file__).resolve().parents[1]
 VESSEL = "kvlcc2"

@@ -54,7 +54,8 @@ def _truths(records) -> dict:
 
 def log_runs(conf: dict, doctor, rep: dict, train, validate) -> list:
     """Each ladder step as one run of the results table (study 'doctor')."""
-    from ..results import ResultStore, run_guarded
+    from ..executor import run_guarded
+    from ..store import ResultStore
 
     store = ResultStore(conf.get("results_dir") or Path(conf["out"]) / "results")
     ids = []

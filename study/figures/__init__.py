@@ -180,7 +180,7 @@ def committed_tables(out: Path) -> dict:
     """study -> (runs, params, table folder) of every study table committed under ``out`` (``<study>/table/``).
     Each study is rebuilt from its own table alone: concatenated, the tables' column types would mix and the
     study's table would not come back to the same bytes."""
-    from ..results import read_table
+    from ..store import read_table
 
     found = {}
     for d in sorted(out.glob(f"*/{TABLE}")):
@@ -193,7 +193,7 @@ def build(results: Path | None, out: Path, table: bool = True) -> Builder:
     """Rebuild the outputs of every study found in the results table (``results``; None: the study tables
     committed under ``out``); compose README.md and CLAIMS.md from every study's index in ``out`` (rebuilt now
     or before)."""
-    from ..results import ResultStore
+    from ..store import ResultStore
     from .studies import discover
 
     out = Path(out)

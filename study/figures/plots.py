@@ -121,7 +121,7 @@ class Builder:
 
 def load_tables(results: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(runs, params) of the finished runs, params joined with the run columns the figures group by."""
-    from ..results import ResultStore
+    from ..store import ResultStore
 
     return prepare_tables(*ResultStore(results).load())
 

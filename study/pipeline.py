@@ -3,11 +3,15 @@
 
 ``run_study(conf)`` takes the resolved configuration as a plain dict (what the Hydra app passes, and what
 tests build with ``compose``) and returns the run's result: metrics, per-parameter estimates against truth,
-timings. The results store (``study.results``) wraps it so that every run, ok or failed, becomes one record.
+timings. :class:`SimulatedJob` is the same run for many independent datasets of one configuration
+(``replicates=N``): the noise-free truth is simulated once, each dataset draws its own measurement noise (and
+its own random rudder signal), and the identified models are replayed through each validation manoeuvre in one
+batch. The executor (``study.executor``) claims, resumes and records each dataset as a run of its own.
 """
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
@@ -115,11 +119,15 @@ def measurement(conf: dict, seed: int, vessel=None) -> MeasurementModel:
     )
 
 
-def simulate_set(vessel, names, conf, seed_base):
+def simulate_set(vessel, names, conf, seed_base, only=None):
+    """Each manoeuvre of ``names`` (only those in ``only``, when given), manoeuvre ``i`` simulated with seed
+    ``seed_base + i`` (its random signal, where it has one)."""
     sim = conf.get("sim") or {}
     dt = sim.get("dt") or default_dt(vessel)
     out = {}
     for i, name in enumerate(names):
+        if only is not None and name not in only:
+            continue
         man = man_mod.get_maneuver(name)
         T = man.duration_for(vessel) * float(sim.get("duration_scale", 1.0))
         out[name] = simulate(vessel, man, dt=dt, duration=T, seed=seed_base + i)
@@ -189,9 +197,203 @@ def study_config(conf: dict) -> tuple[dict, object]:
     return run_config(conf, data), data
 
 
+def _skipped(why: str) -> dict:
+    return {"status": "skipped", "error": why, "metrics": {}, "params": [], "timings": {}}
+
+
+@dataclass
+class _Identified:
+    """One dataset identified: what :meth:`SimulatedJob.finish` validates."""
+
+    rep: object
+    ident: object
+    metrics: dict
+    timings: dict
+    artefacts: dict
+    vessel: object = None  # the identified model's vessel when the fit made one (a model with effects)
+
+
+class SimulatedJob:
+    """Simulate -> measure -> identify -> validate, for any number of datasets of one configuration.
+
+    The shared work (:meth:`prepare`: vessels, model, structure, estimator, the noise-free training records of
+    every manoeuvre that has no random signal, the validation truth and its metrics) is done once; each dataset
+    (:meth:`identify`) re-simulates only the random-rudder manoeuvres with its own signal, measures every record
+    with its own noise and identifies; :meth:`finish` replays the identified models of a chunk of datasets
+    through each validation manoeuvre in one batch call of the integrator.
+
+    Seeds: dataset seed ``s`` (``study.executor.dataset_seed``; the configuration's ``seed`` for replicate 0)
+    draws the random rudder signal of training manoeuvre ``i`` from ``1000 s + i`` and its measurement noise from
+    ``7919 s + i``; the estimator's own randomness from ``s``. The validation manoeuvres are the configuration's
+    (``1000 seed + 500``), the same for every dataset.
+    """
+
+    def __init__(self, conf: dict):
+        self.conf = conf
+        self.seed = int(conf.get("seed", 0))
+
+    # -- shared by every dataset
+    def prepare(self) -> dict | None:
+        from .identify.estimators import make_estimator
+        from .identify.models import make_model
+        from .identify.structures import make_structure
+
+        conf, t0 = self.conf, time.perf_counter()
+        try:
+            self.truth, self.base = vessels_for(conf)
+        except NotApplicable as e:  # e.g. shallow water on a Nomoto model: nothing for the effect to act on
+            return _skipped(str(e))
+        self.model = make_model(conf["model"], self.base)
+        self.structure = make_structure(conf["structure"])
+        self.est_cfg = estimator_config(conf)
+        why = skip_reason(self.model, self.structure, make_estimator(self.est_cfg))
+        if why:
+            return _skipped(why)
+        self.with_effects = bool(conf["model"].get("effects") or [])
+        if self.with_effects and (self.model.type != "kind" or self.structure.simulates):
+            return _skipped("model.effects need a force model (type: kind) and a regression structure")
+        mans = conf["maneuvers"]
+        self.train_names = list(mans["train"])
+        self.random = {n for n in self.train_names if man_mod.get_maneuver(n).type == "random"}
+        fixed = [n for n in self.train_names if n not in self.random]
+        # a manoeuvre without a random signal is the same truth for every dataset: simulated once
+        clean = simulate_set(self.truth, self.train_names, conf, seed_base=1000 * self.seed, only=fixed)
+        self.clean_fixed = clean
+        step = float((conf.get("sim") or {}).get("dt") or default_dt(self.truth))
+        sample_dt = sample_interval(conf, self.truth) or step
+        T_ship = time_scale(self.truth)
+        self.sampling = {"sample_dt": sample_dt, "sample_dt_LU": sample_dt / T_ship if T_ship else float("nan")}
+        self.t_simulate_fixed = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        self.truth_val = simulate_set(self.truth, mans["validate"], conf, seed_base=1000 * self.seed + 500)
+        self.truth_val_metrics = {name: _standard(df, self.truth.L) for name, df in self.truth_val.items()}
+        self.t_validate_truth = time.perf_counter() - t0
+        return None
+
+    # -- one dataset
+    def dataset(self, dseed: int) -> tuple[list, dict]:
+        """The measured training records of dataset seed ``dseed`` and their timings."""
+        conf, timings = self.conf, {}
+        t0 = time.perf_counter()
+        clean = dict(self.clean_fixed)
+        if self.random:
+            clean.update(simulate_set(self.truth, self.train_names, conf, seed_base=1000 * dseed,
+                                      only=sorted(self.random)))
+        timings["simulate_train"] = time.perf_counter() - t0 + self.t_simulate_fixed
+        t0 = time.perf_counter()
+        records = [measurement(conf, seed=dseed * 7919 + i, vessel=self.truth).apply(clean[name])
+                   for i, name in enumerate(self.train_names)]
+        timings["measure"] = time.perf_counter() - t0
+        return records, timings
+
+    def identify(self, rep) -> _Identified:
+        from .identify.fit import Identification, identify
+
+        dseed = int(getattr(rep, "dataset_seed", self.seed))
+        records, timings = self.dataset(dseed)
+        metrics = {"n_samples": int(sum(len(r) for r in records)), **self.sampling}
+        vessel = None
+        if self.with_effects:
+            # a model with effects (model.effects=[current, ...]): identified with them by variable projection
+            from .identify.with_effects import identify_in_study
+
+            t0 = time.perf_counter()
+            res = identify_in_study(self.base, self.conf["model"], records, self.conf["structure"], self.truth)
+            timings["fit"] = time.perf_counter() - t0
+            rel = [abs(p["estimate"] - p["truth"]) / abs(p["truth"]) for p in res["params"] if p["truth"]]
+            ident = Identification(res["estimates"], res["params"],
+                                   {**res["metrics"], "drift_median": float(np.median(rel)) if rel else float("nan")},
+                                   {}, {})
+            vessel = res["vessel"]
+        else:
+            ident = identify(self.model, self.structure, self.est_cfg, records, seed=dseed,
+                             progress=bool(self.conf.get("progress", False)))
+        timings.update(ident.timings)
+        metrics.update(ident.metrics)
+        return _Identified(rep, ident, metrics, timings, dict(ident.artefacts), vessel)
+
+    # -- validation of a chunk of datasets
+    def finish(self, done: list) -> list[dict]:
+        conf = self.conf
+        names = list(self.truth_val)
+        chans = self.model.channels
+        keep_traces = bool((conf.get("artefacts") or {}).get("traces", True))
+        t0 = time.perf_counter()
+        for d in done:
+            bad = sorted(k for k, v in d.ident.estimates.items() if v is None or not np.isfinite(v))
+            if bad:  # e.g. Nomoto T1, T2 of a complex pole pair, or T = -1/0 when a selector dropped r
+                d.metrics["val_skipped"] = 1.0
+                d.metrics["val_skipped_reason"] = f"no finite estimate of {bad}: the identified model cannot be " \
+                                                  "simulated"
+        live = [d for d in done if "val_skipped" not in d.metrics]
+        vessels = [d.vessel or self.model.model_vessel(d.ident.estimates) for d in live]
+        preds = self._replay(vessels, names)
+        share = (time.perf_counter() - t0) / max(1, len(done))
+        for d, pred_val in zip(live, preds):
+            t1 = time.perf_counter()
+            for name in names:
+                meas, pred = self.truth_val[name], pred_val[name]
+                m = d.metrics
+                if not np.all(np.isfinite(pred[list(chans)].to_numpy())):
+                    m[f"val_{name}_diverged"] = 1.0
+                    continue
+                m[f"val_{name}_diverged"] = 0.0
+                for k, v in prediction_metrics(meas, pred, channels=chans).items():
+                    if np.isscalar(v):
+                        m[f"val_{name}_{k}"] = float(v)
+                for k, v in self.truth_val_metrics[name].items():
+                    m[f"val_{name}_truth_{k}"] = v
+                for k, v in _standard(pred, self.truth.L).items():
+                    m[f"val_{name}_model_{k}"] = v
+                if keep_traces:
+                    d.artefacts[f"validation/{name}.csv"] = trace_bytes(meas, pred, chans)
+                if d.ident.draws and keep_traces:
+                    band = _predictive_band(self.model, d.ident.draws, name, meas, conf, self.seed)
+                    if band is not None:
+                        d.artefacts[f"validation/{name}_band.csv"] = band
+            d.timings["validate"] = share + time.perf_counter() - t1 + self.t_validate_truth
+        for d in done:
+            d.timings.setdefault("validate", share)
+        return [{"metrics": d.metrics, "params": d.ident.params, "timings": d.timings, "artefacts": d.artefacts}
+                for d in done]
+
+    def _replay(self, vessels: list, names: list) -> list[dict]:
+        """Each identified model through each validation manoeuvre: one batch call of the integrator per
+        manoeuvre when the models differ only in their parameters (a model with effects is replayed alone)."""
+        if not vessels:
+            return []
+        v0 = vessels[0]
+        same = all(v.kind_name == v0.kind_name and len(v.params) == len(v0.params) and v.U0 == v0.U0
+                   and v.n0 == v0.n0 and np.array_equal(np.asarray(v.env), np.asarray(v0.env)) for v in vessels)
+        if not same:
+            return [simulate_set(v, names, self.conf, seed_base=1000 * self.seed + 500) for v in vessels]
+        from .sim import simulate_batch, to_frame
+
+        sim = self.conf.get("sim") or {}
+        P = np.column_stack([v.params for v in vessels])
+        out: list = [dict() for _ in vessels]
+        for i, name in enumerate(names):
+            man = man_mod.get_maneuver(name)
+            T = man.duration_for(vessels[0]) * float(sim.get("duration_scale", 1.0))
+            t, Y = simulate_batch(vessels[0], man, P, dt=sim.get("dt") or default_dt(vessels[0]), duration=T,
+                                  seed=1000 * self.seed + 500 + i)
+            for j in range(len(vessels)):
+                out[j][name] = to_frame(Y, t, j)
+        return out
+
+
+def _standard(df, L) -> dict:
+    """The standard manoeuvre metrics of a record as floats (those it cannot carry, e.g. too short, absent)."""
+    try:
+        return {k: float(v) for k, v in standard_metrics(df, L=L).items()
+                if np.isscalar(v) and not isinstance(v, str)}
+    except ValueError:
+        return {}
+
+
 def run_study(conf: dict, data=None) -> dict:
-    """Run one configuration; returns ``{'metrics', 'params', 'timings', 'artefacts'}`` or a skipped result
-    ``{'status': 'skipped', 'error': reason}`` for a combination that makes no sense (see study.results).
+    """Run one configuration on one dataset; returns ``{'metrics', 'params', 'timings', 'artefacts'}`` or a
+    skipped result ``{'status': 'skipped', 'error': reason}`` for a combination that makes no sense.
 
     With ``conf['train']`` set the run is on the user's records (``study.records_run``): ``data`` are the records
     ``study_config`` read (read here when None)."""
@@ -202,98 +404,8 @@ def run_study(conf: dict, data=None) -> dict:
         from .records_run import load, run_on_records
 
         return run_on_records(conf, data if data is not None else load(conf))
-    from .identify.estimators import make_estimator
-    from .identify.fit import Identification, identify
-    from .identify.models import make_model
-    from .identify.structures import make_structure
-
-    timings = {}
-    seed = int(conf.get("seed", 0))
-    try:
-        truth, base = vessels_for(conf)
-    except NotApplicable as e:  # e.g. shallow water on a Nomoto model: nothing for the effect to act on
-        return {"status": "skipped", "error": str(e), "metrics": {}, "params": [], "timings": {}}
-    model = make_model(conf["model"], base)
-    structure = make_structure(conf["structure"])
-    est_cfg = estimator_config(conf)
-    estimator = make_estimator(est_cfg)
-    why = skip_reason(model, structure, estimator)
-    if why:
-        return {"status": "skipped", "error": why, "metrics": {}, "params": [], "timings": {}}
-
-    t0 = time.perf_counter()
-    mans = conf["maneuvers"]
-    clean_train = simulate_set(truth, mans["train"], conf, seed_base=1000 * seed)
-    timings["simulate_train"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    records = []
-    for i, (name, df) in enumerate(clean_train.items()):
-        records.append(measurement(conf, seed=seed * 7919 + i, vessel=truth).apply(df))
-    timings["measure"] = time.perf_counter() - t0
-    # the sampling interval in seconds and in the ship's time scale: every run says how coarsely it was sampled
-    step = float((conf.get("sim") or {}).get("dt") or default_dt(truth))
-    sample_dt = sample_interval(conf, truth) or step
-    T_ship = time_scale(truth)
-    sampling = {"sample_dt": sample_dt, "sample_dt_LU": sample_dt / T_ship if T_ship else float("nan")}
-
-    if (conf["model"].get("effects") or []):
-        # a model with effects (model.effects=[current, ...]): identified with them by variable projection
-        from .identify.with_effects import identify_in_study
-
-        if model.type != "kind" or structure.simulates:
-            return {"status": "skipped", "error": "model.effects need a force model (type: kind) and a regression "
-                    "structure", "metrics": {}, "params": [], "timings": {}}
-        t0 = time.perf_counter()
-        res = identify_in_study(base, conf["model"], records, conf["structure"], truth)
-        timings["fit"] = time.perf_counter() - t0
-        metrics = {"n_samples": int(sum(len(r) for r in records)), **res["metrics"]}
-        rel = [abs(p["estimate"] - p["truth"]) / abs(p["truth"]) for p in res["params"] if p["truth"]]
-        metrics["drift_median"] = float(np.median(rel)) if rel else float("nan")
-        ident = Identification(res["estimates"], res["params"], metrics, {}, {})
-        model_vessel_override = res["vessel"]
-    else:
-        ident = identify(model, structure, est_cfg, records, seed=seed,
-                         progress=bool(conf.get("progress", False)))
-        model_vessel_override = None
-    timings.update(ident.timings)
-    metrics = {"n_samples": int(sum(len(r) for r in records)), **sampling, **ident.metrics}
-    artefacts = dict(ident.artefacts)
-
-    # validation: the identified model (depth known, environment unknown) against the truth
-    t0 = time.perf_counter()
-    bad = sorted(k for k, v in ident.estimates.items() if v is None or not np.isfinite(v))
-    if bad:  # e.g. Nomoto T1, T2 of a complex pole pair, or T = -1/0 when a selector dropped r
-        metrics["val_skipped"] = 1.0
-        metrics["val_skipped_reason"] = f"no finite estimate of {bad}: the identified model cannot be simulated"
-        timings["validate"] = time.perf_counter() - t0
-        return {"metrics": metrics, "params": ident.params, "timings": timings, "artefacts": artefacts}
-    model_vessel = model_vessel_override or model.model_vessel(ident.estimates)
-    truth_val = simulate_set(truth, mans["validate"], conf, seed_base=1000 * seed + 500)
-    pred_val = simulate_set(model_vessel, mans["validate"], conf, seed_base=1000 * seed + 500)
-    L = truth.L
-    chans = model.channels
-    keep_traces = bool((conf.get("artefacts") or {}).get("traces", True))
-    for name in truth_val:
-        meas, pred = truth_val[name], pred_val[name]
-        if not np.all(np.isfinite(pred[list(chans)].to_numpy())):
-            metrics[f"val_{name}_diverged"] = 1.0
-            continue
-        metrics[f"val_{name}_diverged"] = 0.0
-        for k, v in prediction_metrics(meas, pred, channels=chans).items():
-            if np.isscalar(v):
-                metrics[f"val_{name}_{k}"] = float(v)
-        for label, df in (("truth", meas), ("model", pred)):
-            try:
-                for k, v in standard_metrics(df, L=L).items():
-                    if np.isscalar(v) and not isinstance(v, str):
-                        metrics[f"val_{name}_{label}_{k}"] = float(v)
-            except ValueError:
-                pass  # a metric the record cannot carry (e.g. too short) is simply absent
-        if keep_traces:
-            artefacts[f"validation/{name}.csv"] = trace_bytes(meas, pred, chans)
-        if ident.draws and keep_traces:
-            band = _predictive_band(model, ident.draws, name, meas, conf, seed)
-            if band is not None:
-                artefacts[f"validation/{name}_band.csv"] = band
-    timings["validate"] = time.perf_counter() - t0
-    return {"metrics": metrics, "params": ident.params, "timings": timings, "artefacts": artefacts}
+    job = SimulatedJob(conf)
+    skipped = job.prepare()
+    if skipped is not None:
+        return skipped
+    return job.finish([job.identify(None)])[0]

@@ -161,8 +161,20 @@ def check_estimator(conf: dict) -> None:
 
 def check_run(conf: dict) -> None:
     """A study run's configuration (``python -m study``)."""
+    check_replicates(conf)
     check_simulation(conf)
     check_estimator(conf)
+
+
+def check_replicates(conf: dict) -> None:
+    """``replicates``: how many independent datasets a job identifies, a whole number >= 1; the user's own
+    records (``train=``) are one dataset."""
+    n = conf.get("replicates", 1)
+    if n is None or isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise ConfigError(f"replicates={n!r}: expected a whole number >= 1 (independent datasets of the run)")
+    if n > 1 and conf.get("train") is not None:
+        raise ConfigError(f"replicates={n}: the records given by train= are one dataset; expected replicates=1 "
+                          "with train= (replicates draw new measurement noise of a simulated run)")
 
 
 def check_simulate(conf: dict) -> Path:

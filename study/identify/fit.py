@@ -140,21 +140,21 @@ class Prepared:
     dropped_differences: int = 0  # differenced rows dropped afterwards (cleaning, split): gaps in the chains
 
 
-def term_scales(model, records) -> dict:
+def term_scales(model, records, rows: dict | None = None) -> dict:
     """Each model term's weight in its equation: the RMS of the term's regressor over the RMS of the equation's
     left-hand side, on central-difference rows of the training records. The same rows serve every structure and
     estimator of a dataset, so scaled errors of two structures compare. ``|estimate - truth| * scale`` is the
     error's contribution to the equation in units of the equation's own size: a coefficient near zero whose term
     hardly acts no longer dominates a median of relative errors, and a zero truth gets a finite figure. Empty for
-    models whose reported parameters are not regression columns (Nomoto's K, T, ...) or rows that cannot be made."""
+    models whose reported parameters are not regression columns (Nomoto's K, T, ...) or rows that cannot be made.
+    ``rows``: those central-difference rows when the caller has built them already (:func:`regression_rows`)."""
     if getattr(model, "type", None) == "nomoto":
         return {}
-    from .structures import make_structure
-
-    try:
-        rows = regression_rows(model, make_structure({"name": "central", "clean": {}, "split": {}}), records)
-    except (ValueError, KeyError):
-        return {}
+    if rows is None:
+        try:
+            rows = regression_rows(model, _central(), records)
+        except (ValueError, KeyError):
+            return {}
     out = {}
     for eq, (Phi, y, _) in rows.items():
         ry = float(np.sqrt(np.mean(np.square(y)))) if len(y) else 0.0
@@ -165,14 +165,28 @@ def term_scales(model, records) -> dict:
     return out
 
 
+def _central():
+    from .structures import make_structure
+
+    return make_structure({"name": "central", "clean": {}, "split": {}})
+
+
+def _same_rows_as_central(structure, candidates) -> bool:
+    """Whether ``structure`` builds the rows :func:`term_scales` needs (central differences, no candidates):
+    its clean-up and split act only after the rows are built."""
+    return not candidates and structure.name == "central" and type(structure) is type(_central())
+
+
 def prepare(model, structure, records, candidates: int | None = None, seed: int = 0,
-            operators: bool = False) -> dict:
+            operators: bool = False, rows: dict | None = None) -> dict:
     """Per equation the :class:`Prepared` regression of ``model`` on ``records`` with ``structure``; with
     ``operators`` also the training rows' noise operators (:func:`noise_operators` through the post-processing's
-    row map, as a :class:`study.identify.row_noise.RowOperators`; None when the structure has none)."""
+    row map, as a :class:`study.identify.row_noise.RowOperators`; None when the structure has none). ``rows``:
+    the structure's rows when the caller has built them already (:func:`regression_rows`)."""
     from .row_noise import RowOperators
 
-    rows = regression_rows(model, structure, records, candidates=candidates)
+    if rows is None:
+        rows = regression_rows(model, structure, records, candidates=candidates)
     ops = noise_operators(model, structure, records) if operators else None
     out = {}
     for eq, (Phi, y, seg) in rows.items():
@@ -202,6 +216,7 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
     truth, truth_how, exact = model.truth()
     truth_kind = "exact" if exact else truth_how.split(":")[0]
     coef_rows = []  # (equation, column name, estimate, extras)
+    central_rows = None  # the central-difference rows, when the run builds them anyway (term_scales)
     samples = {}  # column name -> posterior draws
     if structure.simulates:
         t0 = time.perf_counter()
@@ -235,7 +250,10 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
         est0 = make_estimator(estimator_cfg)
         wants_ops = bool(getattr(est0, "uses_noise_operators", False)) and prior is None
         t0 = time.perf_counter()
-        prepared = prepare(model, structure, records, candidates=cand, seed=seed, operators=wants_ops)
+        built = regression_rows(model, structure, records, candidates=cand)
+        if _same_rows_as_central(structure, cand):
+            central_rows = built  # term_scales' rows: built once
+        prepared = prepare(model, structure, records, candidates=cand, seed=seed, operators=wants_ops, rows=built)
         timings["regressors"] = time.perf_counter() - t0
         # ... and the rows' truncation and regressors' noise, removed by its likelihood (study.identify.row_errors)
         errors, trunc_rows = {}, None
@@ -321,7 +339,7 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
         if not trusted:
             logger.warning("intervals not trusted: %s", note)
     # parameter rows with truth and drift; each error also scaled by its term's weight in the equation
-    scales = term_scales(model, records) if truth else {}
+    scales = term_scales(model, records, rows=central_rows) if truth else {}
     params = []
     for eq, n, v, extra in coef_rows:
         t = truth.get(n)

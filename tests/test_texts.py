@@ -118,4 +118,6 @@ def test_the_commands_help():
         assert p.returncode == 0, f"python -m {' '.join(c)}: exit {p.returncode}\n{err}"
         assert len(out.strip().splitlines()) >= 3, f"python -m {' '.join(c)}: no help\n{out}"
         found += [f"python -m {' '.join(c)}: {x}" for x in problems(out)]
+        if c[0] in ("study", "study.simulate", "study.diagnose"):  # Hydra's help template, conf/hydra/help/
+            assert "Example" in out and "Usage: python -m" in out, f"python -m {' '.join(c)}: no usage or example"
     assert not found, "\n".join(found)

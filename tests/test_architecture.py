@@ -1,6 +1,6 @@
 """The architecture, checked: the layers of ``.importlinter`` hold (import-linter, every import including those
 inside functions), no contract lists an exception, no module of the package is in an import cycle, and the
-README's layer table is the contract's.
+layer table of the documentation (docs/concepts/architecture.md) is the contract's.
 
 The import graph is built from the source on disk every time (no cache): a test must not depend on a cache's
 state.
@@ -76,15 +76,20 @@ def test_the_cycle_check_finds_a_cycle():
     """The check above can fail: the same function finds a cycle added to the real graph."""
     graph = grimp.build_graph("study", cache_dir=None)
     assert _cycle_through(graph, "study.sim.core", "study.maneuvers") is None
-    graph.add_import(importer="study.maneuvers", imported="study.sim")  # the cycle issue 14 removed
+    graph.add_import(importer="study.maneuvers", imported="study.sim")  # a cycle the layers forbid
     cyc = _cycle_through(graph, "study.maneuvers", "study.sim")
     assert cyc is not None and cyc[0] == cyc[-1] == "study.maneuvers"
 
 
-def _readme_layers() -> list[str]:
-    """The module cells of the README's layer table (``## Layout``), top to bottom."""
-    text = (REPO / "README.md").read_text(encoding="utf-8")
-    section = text.split("## Layout", 1)[1].split("\n## ", 1)[0]
+#: the page that describes the layers
+LAYERS_PAGE = REPO / "docs" / "concepts" / "architecture.md"
+
+
+def _docs_layers() -> list[str]:
+    """The module cells of the documentation's layer table (``## Layers`` of docs/concepts/architecture.md), top to
+    bottom."""
+    text = LAYERS_PAGE.read_text(encoding="utf-8")
+    section = text.split("## Layers", 1)[1].split("\n## ", 1)[0]
     rows = [line for line in section.splitlines() if line.startswith("| ") and "layer" not in line.lower()[:12]]
     out = []
     for line in rows:
@@ -94,8 +99,8 @@ def _readme_layers() -> list[str]:
     return out
 
 
-def test_the_readme_describes_the_layers_as_they_are():
+def test_the_docs_describe_the_layers_as_they_are():
     top = [c for c in _contracts() if c.get("containers") in ("study", ["study"])][0]
     layers = top["layers"] if isinstance(top["layers"], list) else top["layers"].split("\n")
     want = [" | ".join(m.strip() for m in re.split(r"[|:]", layer) if m.strip()) for layer in layers if layer.strip()]
-    assert _readme_layers() == want
+    assert _docs_layers() == want

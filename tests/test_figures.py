@@ -216,22 +216,3 @@ def test_the_committed_paper_figs_rebuild_from_their_tables_to_the_same_bytes(tm
     assert sorted(after) == sorted(before)
     changed = sorted(k for k in before if before[k] != after[k])
     assert not changed, changed
-
-
-def test_the_readmes_claims_table_matches_claims_md():
-    """Every claim of paper_figs/CLAIMS.md stands in the README's table with the same verdict, and nothing else."""
-    import re
-
-    def rows(text, verdict_col):
-        out = []
-        for ln in text.splitlines():
-            if ln.startswith("| ") and not ln.startswith("| seed |") and "`" not in ln.split("|")[1]:
-                cells = [c.strip() for c in re.split(r"(?<!\\)\|", ln)[1:-1]]
-                if len(cells) > verdict_col and cells[verdict_col].startswith("**"):
-                    out.append((cells[0], cells[1], cells[verdict_col]))
-        return out
-
-    claims = rows((REPO / "paper_figs" / "CLAIMS.md").read_text(), 3)
-    readme = (REPO / "README.md").read_text()
-    sec = readme[readme.index("### The seed papers' claims, tested"):readme.index("### Your own records")]
-    assert claims and rows(sec, 2) == claims

@@ -3,7 +3,7 @@
 Why a plugin: Hydra's BasicSweeper composes *every* job's config before launching anything, to catch
 composition errors early ("This can be a bit slow for large jobs", its own comment), and the launcher composes
 each one again. At about 0.2 s a config, the 1188-job `grand` study spent 4 minutes composing before its
-first job on a 2-core machine. This sweeper composes only enough jobs that every swept value (every
+first job on two cores. This sweeper composes only enough jobs that every swept value (every
 `key=value` of the sweep) appears in at least one composed config: a misspelt group option, a bad value or
 an unknown key still fails before any job runs, in about 25 compositions instead of 1188. An error that only
 a particular combination of values would raise surfaces when the launcher composes that job; the runs that

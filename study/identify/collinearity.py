@@ -1,7 +1,7 @@
 """Multicollinearity of a regressor matrix: correlation matrix, condition numbers, variance inflation factors.
 
-- Correlation matrix: Pearson correlation of the regressor columns (seed 000, Fig. 6).
-- ``cond_corr``: condition number of the correlation matrix, lambda_max / lambda_min (seed 000 eq. 28,
+- Correlation matrix: Pearson correlation of the regressor columns (Song et al. (2025), Fig. 6).
+- ``cond_corr``: condition number of the correlation matrix, lambda_max / lambda_min (Song et al. (2025) eq. 28,
   Table 3: 50.2 sway, 7737 surge, 6352 yaw for its USV).
 - ``cond_scaled``: condition number of the regressor matrix with every column scaled to unit Euclidean norm
   (Belsley, Kuh & Welsch 1980, Regression Diagnostics, ch. 3: scaling without centring, since the models have

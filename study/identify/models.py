@@ -9,7 +9,7 @@ A model config (``conf/model/<name>.yaml``) has a ``type``:
   Omitted terms are zero in the model. The truth is the vessel's value of each coefficient: *exact* when the
   omitted terms are zero in the truth vessel, otherwise *approximate* (and the report says which terms differ).
 - ``nomoto``: the first- or second-order Nomoto (KT) response model, linear or with the cubic term
-  (Nomoto et al. 1957; nonlinear form of Zheng & Xiao 2017, seed 004 eqs. 12-13)::
+  (Nomoto et al. 1957; nonlinear form of Zheng & Xiao 2017, eqs. 12-13)::
 
       order 1:  T r' + r + alpha r^3 = K delta
       order 2:  T1 T2 r'' + (T1 + T2) r' + r + alpha r^3 = K delta + K T3 delta'

@@ -1,6 +1,6 @@
 """The output-error problem: simulate a model through measured records and compare its outputs with them.
 
-Seed 004 (Zheng & Xiao 2017, Sec. 3.2, eqs. 18-19) integrates the KT equations with the measured rudder and
+Zheng & Xiao (2017, Sec. 3.2, eqs. 18-19) integrates the KT equations with the measured rudder and
 compares the heading with the record ("integral" samples, as against finite differences); several records
 (or phases of one) enter one objective at once, its "parallel processing" (Sec. 1.2). Here any model that can
 be simulated does the same: each record segment (cut at dropouts) is replayed open loop from its first
@@ -275,7 +275,7 @@ def default_bounds(model, x0: dict | None, cfg: dict) -> np.ndarray:
 
     Nomoto models: a box in non-dimensional terms (K' = K L/U0, T' = T U0/L, alpha' = alpha (U0/L)^2; model
     config ``oe_bounds``, defaults wide enough for any merchant ship: K' in [0.01, 20], T' in [0.01, 50],
-    T3' in [0, 50], alpha' in [-1e4, 1e4]: the Mariner's is 103) -- independent of any initial estimate, as seed 004's DE is.
+    T3' in [0, 50], alpha' in [-1e4, 1e4]: the Mariner's is 103) -- independent of any initial estimate, as Zheng & Xiao's (2017) DE is.
     Force models: around the equation-error estimate x0, +- ``relative`` x |x0| but at least ``floor`` x the
     largest |x0| of the same equation (structure config ``output_error.bounds``; defaults 1.0 and 0.05).
     """

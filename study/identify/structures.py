@@ -7,11 +7,11 @@ rows from (``Ops``): ``value(F)`` (a node-wise quantity at the rows: the regress
 time derivative of a measured signal at the rows: the targets). A model equation ``D^p x = sum_i theta_i f_i``
 becomes the rows ``d(x, p) = sum_i theta_i value(f_i(nodes))``:
 
-- ``euler``: forward differences, state at k (seed 000, Song et al. 2025, eq. 14); O(h) truncation error.
-- ``central``: central differences, state at k (seed 004, Zheng & Xiao 2017, eqs. 14-17); O(h^2). Written for
+- ``euler``: forward differences, state at k (Song et al. 2025, eq. 14); O(h) truncation error.
+- ``central``: central differences, state at k (Zheng & Xiao 2017, eqs. 14-17); O(h^2). Written for
   a non-uniform grid (the three-point formulas), so jittered time stamps stay exact to O(h^2).
 - ``integral``: the equation integrated over each sample interval by the trapezoidal rule: value =
-  (f_k + f_k+1)/2, d(x, 1) = (x_k+1 - x_k)/h (seed 003, Du et al. 2016, Sec. 3.2: inputs x_k + x_k+1, output
+  (f_k + f_k+1)/2, d(x, 1) = (x_k+1 - x_k)/h (Du et al. 2016, Sec. 3.2: inputs x_k + x_k+1, output
   x_k+1 - x_k; the same rows divided by h so the coefficients keep their units). This is also the weak form of
   SINDy with box test functions (Messenger & Bortz 2021). A second-order equation (Nomoto 2) is integrated
   against a hat function over two intervals instead, so that again no derivative of the data is taken.
@@ -23,16 +23,16 @@ becomes the rows ``d(x, p) = sum_i theta_i value(f_i(nodes))``:
   (``study.state_estimation``; options under ``smoothing.rts``); every other signal (rudder,
   propeller, wind...) is smoothed and differentiated by Savitzky-Golay as before, and the same rows are kept
   (the half window at each end dropped), so the two methods differ only in the states.
-- ``diff_center``: a base structure (``euler`` as in seed 000), then its rows differenced,
-  y_k - rho y_k-1 = (phi_k - rho phi_k-1) theta (seed 000 eqs. 15-17, rho = 1), then centred (eq. 18: every
+- ``diff_center``: a base structure (``euler`` as in Song et al. (2025)), then its rows differenced,
+  y_k - rho y_k-1 = (phi_k - rho phi_k-1) theta (Song et al. (2025) eqs. 15-17, rho = 1), then centred (eq. 18: every
   column minus its mean over the training rows).
-- ``output_error``: no rows; the model is simulated through the records with their measured inputs (seed 004's
+- ``output_error``: no rows; the model is simulated through the records with their measured inputs (Zheng & Xiao's (2017)
   "integral" method; see ``study.identify.output_error``). Only estimators that simulate can use it.
 
 Every regression structure takes the seed-000 cleaning steps (eqs. 4-9), each selectable in its config
 (``clean:``): non-finite rows dropped, rows with a z-score above a limit in any column dropped, duplicated rows
 dropped, rows whose target is smaller than a threshold dropped, and a train/test split of the rows
-(``split:``); ``select: {n_rows: k}`` keeps k evenly spaced training rows (seed 003 uses 100 of 600). They act
+(``split:``); ``select: {n_rows: k}`` keeps k evenly spaced training rows (Du et al. (2016) uses 100 of 600). They act
 per equation on that equation's rows.
 """
 from __future__ import annotations
@@ -151,7 +151,7 @@ class CentralOps(Ops):
 
 class IntegralOps(Ops):
     """Rows = the equation integrated against a test function, so that no derivative of a measured signal is
-    taken. Order 1: a box over [t_k, t_k+1] (seed 003's trapezoidal rows). Order 2: a hat over
+    taken. Order 1: a box over [t_k, t_k+1] (Du et al.'s (2016) trapezoidal rows). Order 2: a hat over
     [t_k-1, t_k+1] (peak 1 at t_k); integrating by parts puts both derivatives on the hat,
     int(hat x'') = x_k+1/h2 - x_k (1/h1 + 1/h2) + x_k-1/h1, and int(hat f) is exact for piecewise-linear f:
     (h1 f_k-1 + 2 (h1 + h2) f_k + h2 f_k+1) / 6. Rows are divided by the test function's integral, so the
@@ -367,7 +367,7 @@ class Structure:
 
     def measured(self, seg: Segment) -> Segment:
         """The segment as the rows see it: with ``rate_from_heading`` the yaw rate is the three-point central
-        difference of the heading (seed 004 eq. 14: r, r', r'' all from psi, as when no gyro is logged)."""
+        difference of the heading (Zheng & Xiao (2017) eq. 14: r, r', r'' all from psi, as when no gyro is logged)."""
         if not self.rate_from_heading:
             return seg
         data = dict(seg.data)

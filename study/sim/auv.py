@@ -1,4 +1,4 @@
-"""Horizontal-plane AUV model of seed 003 (Du et al. 2016): Abkowitz-type hull, rudder and propeller.
+"""Horizontal-plane AUV model of Du et al. (2016): Abkowitz-type hull, rudder and propeller.
 
 Du, W., Xu, F., Xiao, T., Yang, L., Wang, M., Du, X. (2016). Online modeling of underwater vehicles'
 maneuvering motion by using support vector machine. Ship Science and Technology 38(6), 81-85
@@ -83,7 +83,7 @@ U_MIN_FRAC = 0.05
 
 @njit(cache=False, inline="always", error_model="numpy")  # not cached: would go stale when fastmath changes
 def accel(u, v, r, delta, n, Xe, Ye, Ne, P, b):
-    """Seed 003 eqs. (1), (3)-(5) in the horizontal plane, solved for (du, dv, dr) [SI]."""
+    """Du et al. (2016) eqs. (1), (3)-(5) in the horizontal plane, solved for (du, dv, dr) [SI]."""
     rho = P[I_RHO, b]; L = P[I_L, b]
     q2 = 0.5 * rho * L * L
     q3 = q2 * L

@@ -564,7 +564,7 @@ def _run_loop_asm(run, n_kind_params: int) -> str:
     ``vdivpd``, ``vsqrtpd``) in the loop body. Always compiled afresh (a few seconds), with numba's on-disk cache
     off, for that one signature: numba keeps no assembly of code it loaded from its cache, and which overloads a
     process compiled itself depends on what ran before and on the cache's state, so the answer must not come
-    from them (issue 12: the README's two commands run in order were reported to fail here).
+    from them (the two quickstart commands run one after the other, compile state differing, must both pass).
     """
     run = njit(cache=False, _nrt=False, pipeline_class=_NoAliasCompiler, **JIT_FLAGS)(run.py_func)
     B = 1

@@ -188,7 +188,7 @@ class ShallowWater:
     the Kijima set gives no added-mass factor). ``h_T = None`` or ``inf`` is deep water (no change).
     A kind without hull derivatives (``LINEAR_DERIVATIVES`` empty: ``nomoto``) raises a ValueError in shallow
     water; the depth changes K and T of a real ship, and a Nomoto truth would need them from elsewhere.
-    Seed 001 classes h/T > 3 deep, 1.5-3 medium, 1.2-1.5 shallow, < 1.2 very shallow.
+    Xu & Guedes Soares classes h/T > 3 deep, 1.5-3 medium, 1.2-1.5 shallow, < 1.2 very shallow.
     """
 
     h_T: float | None = None

@@ -1,4 +1,4 @@
-"""Waterjet-propelled USV, 3-DOF separated (MMG-type) model of seed 000 (Song et al. 2025).
+"""Waterjet-propelled USV, 3-DOF separated (MMG-type) model of Song et al. (2025).
 
 Song, L., Wang, Y., Peng, W., Li, P., Liu, Y., Zhang, Y. (2025). Hydrodynamic coefficients identification of
 ship simplified modular model based on support vector regression. Chinese Journal of Ship Research 20(1),
@@ -84,7 +84,7 @@ I_AJ, I_ALPHA, I_XT = (IDX[k] for k in ("Aj", "alpha", "xT"))
 
 @njit(cache=False, inline="always", error_model="numpy")  # not cached: would go stale when fastmath changes
 def accel(u, v, r, delta, n, Xe, Ye, Ne, P, b):
-    """Seed 000 eqs. (1)-(3) solved for (du, dv, dr); ``n`` is the jet velocity v_j [m/s]."""
+    """Song et al. (2025) eqs. (1)-(3) solved for (du, dv, dr); ``n`` is the jet velocity v_j [m/s]."""
     rho = P[I_RHO, b]; L = P[I_L, b]; d = P[I_D, b]
     U = fm.sqrt(u * u + v * v)
     moving = U > 1e-6

@@ -1,4 +1,4 @@
-"""Seed 000 (Song et al. 2025): SVR identification of a simplified MMG model; differenced and centred samples against
+"""Song et al. (2025): SVR identification of a simplified MMG model; differenced and centred samples against
 forward differences, and Lasso's term selection.
 
 ``build`` writes the study's figures and tables into ``paper_figs/seed000_svr_mmg/`` and appends its claim (if any) to
@@ -97,7 +97,7 @@ def _alternatives(q: pd.DataFrame) -> list:
 
 
 def claim(b: Builder, r, p) -> list:
-    """Seed 000's compound claim split in three, each decided by paired comparisons (study/figures/verdicts.py):
+    """Song et al.'s (2025) compound claim split in three, each decided by paired comparisons (study/figures/verdicts.py):
     SVR on differenced and centred rows against forward differences, on the seed's simplified model; the same for
     every other estimator, one verdict each; Lasso dropping N'vrr and N'vvr."""
     keys = ["cfg_model.name", "cfg_estimator.name", "cfg_noise.name", "cfg_seed", "m_sample_dt_LU"]

@@ -1,4 +1,4 @@
-"""Seed 001 (Xu & Guedes Soares): Nomoto models in shallow water identified by the truncated LS-SVM against least
+"""Xu & Guedes Soares: Nomoto models in shallow water identified by the truncated LS-SVM against least
 squares, LS-SVM and nu-SVR.
 
 ``build`` writes the study's figures and tables into ``paper_figs/seed001_shallow_water/`` and appends its claim (if any) to
@@ -143,7 +143,7 @@ KEYS = ["cfg_vessel.name", "cfg_vessel.operation.U0", "hT", "cfg_noise.name", "c
 
 
 def claim(b: Builder, r, p) -> list:
-    """Seed 001's compound claim split in three: (a) the truncated LS-SVM beats least squares, LS-SVM and nu-SVR
+    """Xu & Guedes Soares's compound claim split in three: (a) the truncated LS-SVM beats least squares, LS-SVM and nu-SVR
     under noise, decided per model and per comparator on the exact KT truths (paired per coefficient over depth,
     noise, structure; KCS's Nomoto "truth" is a linearisation of an MMG vessel, not a truth: its rows are not
     scored); (b) whether truncation was exercised at all (an L-curve that keeps every column makes tlssvm least

@@ -1,4 +1,4 @@
-"""Seed 003 (Du et al. 2016): the incremental LS-SVM on an AUV's integral samples, and how fast its derivatives
+"""Du et al. (2016): the incremental LS-SVM on an AUV's integral samples, and how fast its derivatives
 settle.
 
 ``build`` writes the study's figures and tables into ``paper_figs/seed003_online_auv/`` and appends its claim (if any) to
@@ -87,7 +87,7 @@ def settling(b: Builder, run, params) -> pd.DataFrame | None:
 
 
 def claim(b: Builder, r, p) -> list:
-    """Seed 003: the incremental LS-SVM on integral samples, every derivative settled after about 20 samples.
+    """Du et al. (2016): the incremental LS-SVM on integral samples, every derivative settled after about 20 samples.
     Decided per run, on a band around the truth (the seed compares with the captive-test values), at the seed's
     sampling interval scaled to this AUV's time scale; the estimator's own criterion (within 5 % of its own final
     value, which a zero truth meets only at the last sample) and the other intervals and structures are the

@@ -1,4 +1,4 @@
-"""Seed 004 (Zheng & Xiao 2017): nonlinear KT models by differential evolution on output-error (integral) samples
+"""Zheng & Xiao (2017): nonlinear KT models by differential evolution on output-error (integral) samples
 against central differences, one record against two.
 
 ``build`` writes the study's figures and tables into ``paper_figs/seed004_kt_de/`` and appends its claim (if any) to
@@ -89,7 +89,7 @@ KEYS = ["cfg_vessel.name", "cfg_model.name", "cfg_maneuvers.name", "cfg_noise.na
 
 
 def claim(b: Builder, r, p) -> list:
-    """Seed 004's compound claim split in two, each decided per model order on the exact KT truths only (a
+    """Zheng & Xiao's (2017) compound claim split in two, each decided per model order on the exact KT truths only (a
     second-order model of the first-order kt1_mariner is 'degenerate', not exact; the Abkowitz Mariner's truths
     are a linearisation): (a) output error on the heading beats central differences, paired per coefficient
     (relative errors both below 1 % are a tie); (b) two records at once beat one, within output error."""

@@ -62,7 +62,7 @@ class Estimator:
     scikit-learn's parameter protocol (``get_params``/``set_params``, so that ``sklearn.base.clone`` works) and
     ``score`` are scikit-learn's own (``BaseEstimator``, ``RegressorMixin``), called on first use rather than
     inherited: importing scikit-learn costs about 1 s of CPU (it imports scipy.stats), which every fresh worker
-    paid before its first run (issue 13); runs by ls, lssvm, the SVR QPs, DE and emcee never need it."""
+    would pay before its first run; runs by ls, lssvm, the SVR QPs, DE and emcee never need it."""
 
     @classmethod
     def _get_param_names(cls):

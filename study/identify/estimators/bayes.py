@@ -21,7 +21,7 @@ Likelihoods (``likelihood``; the output-error one whenever the structure simulat
   and diff_center without its split, 87-95 % at 1 s, 89 % on euler at 0.02 s (before the correction: euler 56 %
   at 0.1 s, its O(h) truncation 1.55 posterior sd; central 70-78 % at 1 s over 20 datasets); on KVLCC2's MMG hull
   (17 coefficients, 20 datasets) 89-91 %, the worst coefficient 80 %, posterior sd 1.02 times the actual spread.
-  Not covered: diff_center as seed 000 splits and cleans it (0-44 % at 0.1 s, 76-78 % at 1 s): the random hold-out
+  Not covered: diff_center as Song et al. (2025) splits and cleans it (0-44 % at 0.1 s, 76-78 % at 1 s): the random hold-out
   leaves gaps in its chains of differences, so the differencing cannot be undone, and its whitened regressors
   are mostly noise (reliability 0.1-0.2 at 0.1 s); such a run says its intervals are not trusted.
 - **regression_iid**: y = X theta + e, e ~ N(0, sigma^2) independent per row, sigma inferred. Computed from the
@@ -42,11 +42,11 @@ multivariate t with n - k degrees of freedom, sigma^2 given them a scaled invers
 aside. Each is still sampled, so that the draws feed the predictive bands and the chain diagnostics like any other
 run's, but with ``moves`` 'auto' the main move (0.9 of the steps) is an independence Metropolis-Hastings proposal
 from that closed form (:class:`LaplaceProposal` with ``df=inf``: the target itself; :class:`IidRegressionProposal`),
-the other 0.1 DE moves: measured on grand's 6 cases (central rows, 32 equations) and seed 000's training set,
+the other 0.1 DE moves: measured on grand's 6 cases (central rows, 32 equations) and Song et al.'s (2025) training set,
 acceptance 0.92-0.94, tau 1.04-1.30 steps (DE moves: 9-52), every chain 200 steps (500-2,750), ESS 2,460-3,090,
 the chain's median and 90 % interval the closed form's within 3.6 Monte Carlo standard errors and its sd within
 0.96-1.04 (``benchmarks/bench_emcee_regression.py``; ``tests/test_emcee_regression_proposals.py``); fit time 0.28 of
-the DE moves' on grand's problems (0.10-0.38 on seed 000's), the rest mostly the closed form itself. The DE moves'
+the DE moves' on grand's problems (0.10-0.38 on Song et al.'s (2025)), the rest mostly the closed form itself. The DE moves'
 chains before had sds 0.78-1.05 of the closed form's: emcee's ``DESnookerMove`` does not leave the target
 invariant (:class:`SnookerMove`, corrected here, is used instead).
 

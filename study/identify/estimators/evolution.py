@@ -1,16 +1,16 @@
 """Differential evolution (Storn & Price 1997), scipy's implementation, on the output error or a regression.
 
-Seed 004 (Zheng & Xiao 2017, Sec. 1.1, eqs. 1-5) identifies the nonlinear KT parameters by DE with the
+Zheng & Xiao (2017, Sec. 1.1, eqs. 1-5) identifies the nonlinear KT parameters by DE with the
 "best" mutation (eq. 3), binomial crossover (eq. 4) and greedy selection (eq. 5): scipy's
 ``strategy='best1bin'``. Every generation is evaluated in ONE call (``vectorized=True``): on an output-error
 problem the whole population is simulated in lock-step by the compiled batch integrator
 (``study.identify.output_error``), which is what makes DE affordable. All the records of a run enter one
-objective (seed 004's "parallel processing", Sec. 1.2). The result is polished by a bounded Gauss-Newton fit
+objective (Zheng & Xiao's (2017) "parallel processing", Sec. 1.2). The result is polished by a bounded Gauss-Newton fit
 (``output_error.local_fit``: its Jacobian is one batch simulation too) when ``polish`` is set.
 
 On a regression structure DE minimises the mean squared equation error inside a box around the least-squares
 solution; it then finds least squares again (slowly). It is there so that DE can be compared on every
-structure, as seed 004 compares it on differences and on integration.
+structure, as Zheng & Xiao (2017) compares it on differences and on integration.
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ class DifferentialEvolution(Estimator):
     Parameters
     ----------
     strategy : str
-        scipy's mutation strategy ('best1bin' = seed 004 eq. 3 with binomial crossover).
+        scipy's mutation strategy ('best1bin' = Zheng & Xiao (2017) eq. 3 with binomial crossover).
     popsize : int
         Population = popsize x number of parameters (scipy's convention).
     maxiter : int
@@ -44,7 +44,7 @@ class DifferentialEvolution(Estimator):
         Regression only: the box is theta_LS +- max(box_relative |theta_LS|, box_floor max|theta_LS|).
     use_x0 : bool
         Output error: put the problem's initial estimate (equation-error least squares) into the initial
-        population. Off by default: seed 004's point is that DE needs no initial values.
+        population. Off by default: Zheng & Xiao's (2017) point is that DE needs no initial values.
     """
 
     problem_types = frozenset({"regression", "output_error"})

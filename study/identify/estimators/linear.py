@@ -187,7 +187,7 @@ class Ridge(Estimator):
 
 
 class Lasso(Estimator):
-    """Lasso (Tibshirani 1996) by scikit-learn's ``LassoCV``, as seed 000 (Song et al. 2025, eqs. 11-12).
+    """Lasso (Tibshirani 1996) by scikit-learn's ``LassoCV``, as Song et al. (2025, eqs. 11-12).
 
     10-fold cross-validation (contiguous folds: ``KFold`` without shuffling, sklearn's default for
     ``cv=10``) over ``alphas`` log-spaced in 1e-6..1e6 like the seed, no intercept. Columns *and* y are

@@ -16,7 +16,7 @@ gamma on unit-mean-square columns: ``1/gamma`` is compared with the eigenvalues 
 y is not scaled (the solution is linear in y).
 
 Written by hand (no maintained Python LS-SVM solves the linear-kernel primal, the truncated SVD form of
-seed 001 or the incremental inverse of seed 003); the linear algebra is LAPACK through scipy.
+Xu & Guedes Soares or the incremental inverse of Du et al. (2016)); the linear algebra is LAPACK through scipy.
 """
 from __future__ import annotations
 
@@ -196,7 +196,7 @@ class LSSVM(Estimator):
 
 
 class TruncatedLSSVM(Estimator):
-    """Optimal truncated LS-SVM (seed 001: Xu & Guedes Soares, sec. 3): TSVD of the LS-SVM matrix, rank by L-curve.
+    """Optimal truncated LS-SVM (Xu & Guedes Soares, sec. 3): TSVD of the LS-SVM matrix, rank by L-curve.
 
     The LS-SVM matrix ``A`` (``Omega + I/gamma``, or bordered with the bias) is replaced by its rank-r
     truncated SVD, keeping the r largest singular values, and r is chosen at the corner of the L-curve
@@ -309,7 +309,7 @@ class TruncatedLSSVM(Estimator):
 
 
 class OnlineLSSVM(Estimator):
-    """Incremental LS-SVM with bias (seed 003: Du et al. 2016, eqs. 7-21), and its convergence history.
+    """Incremental LS-SVM with bias (Du et al. 2016, eqs. 7-21), and its convergence history.
 
     Dual recursion (n <= ``max_dual``), as the seed: start from the first ``n_init`` samples with
     ``P = Gamma^-1``, ``Gamma(t) = Omega_t + I/gamma`` (eq. 17), add one sample at a time by the block-inverse

@@ -1,6 +1,6 @@
 """Support vector regression with a linear kernel: epsilon-SVR and nu-SVR (libsvm, or the primal QP by Clarabel).
 
-Seed 000 (Song et al. 2025) identifies the MMG coefficients by a linear-kernel epsilon-SVR and reads them from
+Song et al. (2025) identifies the MMG coefficients by a linear-kernel epsilon-SVR and reads them from
 the weights ``w = sum (alpha_i - alpha_i^*) x_i`` (its eq. 26), when the bias b is near 0. scikit-learn's
 ``SVR`` / ``NuSVR`` (libsvm; Chang & Lin 2011) give exactly that as ``coef_``, but libsvm's dual solver is
 slow at the benchmark size: on 16,800 samples with a small epsilon nearly every sample is a support vector
@@ -111,12 +111,12 @@ class _LinearSVR(Estimator):
 
 
 class EpsilonSVR(_LinearSVR):
-    """epsilon-SVR with a linear kernel (Vapnik 1995; Smola & Schoelkopf 2004), as seed 000 (Song et al. 2025).
+    """epsilon-SVR with a linear kernel (Vapnik 1995; Smola & Schoelkopf 2004), as Song et al. (2025).
 
     Columns are standardised inside ``fit`` (divided by their root mean square) and y divided by its
-    standard deviation; the coefficients are the weights ``w`` (seed 000 eq. 26; sklearn's ``coef_``) mapped
+    standard deviation; the coefficients are the weights ``w`` (Song et al. (2025) eq. 26; sklearn's ``coef_``) mapped
     back to the units of X and y. The model has an intercept b (SVR always does): it is reported as
-    ``intercept_`` and, divided by std(y), as ``diagnostics_['intercept_rel']``; seed 000 reads the
+    ``intercept_`` and, divided by std(y), as ``diagnostics_['intercept_rel']``; Song et al. (2025) reads the
     coefficients "when b is near 0" -- b is not forced to 0 here, so a large ``intercept_rel`` flags a fit
     whose coefficients are not the model's. That happens when a regressor is nearly constant (u^2 in a surge
     equation at steady speed): b is unpenalised while |w|^2 is, so the SVR moves that term into b (measured on

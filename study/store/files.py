@@ -59,7 +59,7 @@ def tmp_owner(name: str) -> tuple[str, int] | None:
 
 
 def pid_alive(pid: int) -> bool:
-    """Whether a process of this machine is running (a zombie counts as running: it is not ours to judge)."""
+    """Whether a process of the local host is running (a zombie counts as running: it is not ours to judge)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:

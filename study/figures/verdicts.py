@@ -17,6 +17,14 @@ under each reasonable alternative choice (metric, pairing unit, noise level,
 sampling interval, subset of models...): :func:`settle` says "depends on ..." when the alternatives disagree with
 the primary choice, naming them. Verdicts are computed **per model** (never across models of different order or
 size, whose coefficient counts would weight the answer) and summarised as "holds for k of m models".
+
+**The dataset as the unit.** The coefficients of one fit share one noise realisation, so they are not independent
+evidence: :func:`dataset_errors` reduces each run to one error (the median over its coefficients), a failed run to
+an infinite one (a loss), and :func:`paired_datasets` decides the claim over independent datasets (replicates),
+with the effect size (median error ratio) and its bootstrap interval over datasets, and, for "cannot tell", the
+smallest effect those datasets could have detected (:data:`POWER`), so that "no difference" and "too few data"
+read differently. :func:`label_invariant` scores exchangeable coefficients (two time constants) without their
+labels.
 """
 from __future__ import annotations
 
@@ -29,7 +37,8 @@ from scipy import stats
 ALPHA = 0.05
 TIE = 0.05
 
-__all__ = ["paired", "compare", "sensitivity", "describe", "explain", "settle", "summary", "ALPHA", "TIE"]
+__all__ = ["paired", "compare", "sensitivity", "describe", "explain", "settle", "summary", "dataset_errors",
+           "paired_datasets", "describe_datasets", "detectable_win_rate", "label_invariant", "ALPHA", "TIE", "POWER"]
 
 
 def paired(a, b, tie: float = TIE, floor: float = 0.0) -> dict:
@@ -143,3 +152,135 @@ def sensitivity(p: pd.DataFrame, by: str, a, b, keys: list, choices: list, tie: 
         r = compare(rows_of if rows_of is not None else p, by, a, b, keys, metric, unit, tie=tie, floor=floor)
         rows.append({"choice": "primary" if i == 0 else label, "what": label, **r})
     return pd.DataFrame(rows)
+
+
+# ------------------------------------------------------------------------------------- the dataset as the unit
+
+#: power at which :func:`paired_datasets` states the smallest effect its datasets could have detected
+POWER = 0.8
+N_BOOT = 2000
+
+
+def dataset_errors(p: pd.DataFrame, by: str, keys: list, metric: str = "abs_rel_error",
+                   runs: pd.DataFrame | None = None, summary: str = "median") -> pd.DataFrame:
+    """One error per dataset and method: rows are the datasets (``keys``: everything that names the data, the
+    replicate or seed among them), columns the values of ``by``, each cell the ``summary`` (median or mean) of
+    ``metric`` over the run's coefficients. The coefficients of one fit are never counted as separate evidence.
+
+    ``runs`` (every status): a run of a dataset that failed, or that gave no finite error, is an infinite error,
+    so it loses its pair instead of dropping out of it."""
+    cols = list(keys) + [by]
+    q = p[cols + [metric]].copy()
+    q[metric] = q[metric].astype(float).abs()
+    per = q.groupby(cols, dropna=False)[metric].agg(summary).reset_index()
+    if runs is not None and len(runs):
+        bad = runs[[c for c in cols if c in runs]].copy()
+        if len(bad.columns) == len(cols):
+            failed = runs["status"].eq("failed") if "status" in runs else pd.Series(False, index=runs.index)
+            bad = bad[failed.to_numpy()].assign(**{metric: np.inf})
+            per = pd.concat([per, bad], ignore_index=True)
+    per[metric] = per[metric].fillna(np.inf)  # a run with no finite error counts as a failure
+    return per.pivot_table(index=list(keys), columns=by, values=metric, aggfunc="max", dropna=False)
+
+
+def _critical_wins(n: int, alpha: float = ALPHA) -> int | None:
+    """The fewest wins of ``n`` decided pairs a one-sided sign test calls significant (None: no number can)."""
+    for k in range(n + 1):
+        if stats.binomtest(k, n, 0.5, alternative="greater").pvalue < alpha:
+            return k
+    return None
+
+
+def detectable_win_rate(n: int, power: float = POWER, alpha: float = ALPHA) -> float:
+    """The smallest probability of a win that ``n`` decided pairs detect with the sign test with probability
+    ``power`` (inf when no win rate can be detected: too few pairs)."""
+    k = _critical_wins(n, alpha)
+    if k is None:
+        return math.inf
+    lo, hi = 0.5, 1.0
+    for _ in range(60):  # bisection on P(Binomial(n, q) >= k) = power
+        mid = 0.5 * (lo + hi)
+        if stats.binom.sf(k - 1, n, mid) >= power:
+            hi = mid
+        else:
+            lo = mid
+    return hi
+
+
+def paired_datasets(a, b, tie: float = TIE, floor: float = 0.0, n_boot: int = N_BOOT, seed: int = 0) -> dict:
+    """Claim "a's error is lower than b's" over **datasets**: ``a[i]``, ``b[i]`` are the two methods' errors on
+    dataset ``i`` (inf: the method failed there; NaN: the dataset lacks one of them and is dropped).
+
+    Returns the sign test of :func:`paired` (wins, losses, ties of datasets; ``p``, ``p_reverse``, ``verdict``)
+    and the effect size: ``ratio``, the median over datasets of a / b (below 1: a is better), with its
+    ``ratio_low``, ``ratio_high`` 95 % percentile bootstrap interval over datasets, and ``detectable_ratio``: the
+    ratio a true effect must reach (either way) for these datasets to detect it with probability :data:`POWER`,
+    with the spread of the observed log ratios (inf when no effect could be detected: too few datasets). A
+    "cannot tell" with a detectable ratio near 1 means no difference; far from 1, too few data.
+    """
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    ok = ~(np.isnan(a) | np.isnan(b))
+    a, b = a[ok], b[ok]
+    both_inf = np.isinf(a) & np.isinf(b)
+    fa, fb = np.where(np.isinf(a), 1e300, a), np.where(np.isinf(b), 1e300, b)
+    r = paired(np.where(both_inf, 0.0, fa), np.where(both_inf, 0.0, fb), tie=tie, floor=floor)
+    finite = np.isfinite(a) & np.isfinite(b) & (a > 0) & (b > 0)
+    lr = np.log(a[finite] / b[finite])
+    out = {**r, "datasets": int(len(a)), "failed_a": int(np.sum(np.isinf(a))), "failed_b": int(np.sum(np.isinf(b)))}
+    if len(lr):
+        rng = np.random.default_rng(seed)
+        boot = np.median(lr[rng.integers(0, len(lr), size=(n_boot, len(lr)))], axis=1)
+        out.update(ratio=float(np.exp(np.median(lr))), ratio_low=float(np.exp(np.quantile(boot, 0.025))),
+                   ratio_high=float(np.exp(np.quantile(boot, 0.975))))
+    else:
+        out.update(ratio=math.nan, ratio_low=math.nan, ratio_high=math.nan)
+    q = detectable_win_rate(r["wins"] + r["losses"] or len(a))
+    s = float(np.std(lr, ddof=1)) if len(lr) > 1 else math.nan
+    # log ratios ~ Normal(delta, s): P(win) = Phi(delta / s), so the detectable |delta| is s * Phi^-1(q)
+    out["detectable_ratio"] = float(np.exp(-s * stats.norm.ppf(q))) if np.isfinite(q) and np.isfinite(s) else math.inf
+    return out
+
+
+def describe_datasets(r: dict, unit: str = "datasets") -> str:
+    """One line of :func:`paired_datasets`: verdict, counts of datasets, sign test, effect with its interval, and,
+    for "cannot tell", the smallest effect the datasets could have detected."""
+    if not r["pairs"]:
+        return f"cannot tell (no {unit})"
+    p = r["p"] if r["verdict"] != "does not hold" else r["p_reverse"]
+    ps = "n/a" if not np.isfinite(p) else (f"{p:.2g}" if p >= 1e-4 else "< 1e-4")
+    eff = (f"median error ratio {r['ratio']:.3g} [{r['ratio_low']:.3g}, {r['ratio_high']:.3g}]"
+           if np.isfinite(r["ratio"]) else "no finite error ratio")
+    fails = f"; failures {r['failed_a']} / {r['failed_b']}" if r.get("failed_a") or r.get("failed_b") else ""
+    text = (f"{r['verdict']} ({r['wins']} wins, {r['losses']} losses, {r['ties']} ties of {r['pairs']} {unit}"
+            f"{fails}; sign test p = {ps}; {eff}")
+    if r["verdict"] == "cannot tell":
+        d = r["detectable_ratio"]
+        text += ("; no effect detectable with so few" if not np.isfinite(d) or d <= 0 else
+                 f"; {POWER:.0%} power only for ratios below {d:.3g} or above {1 / d:.3g}")
+    return text + ")"
+
+
+def label_invariant(p: pd.DataFrame, groups: list, by: str = "run_id") -> pd.DataFrame:
+    """``p`` with exchangeable coefficients scored without their labels: within each run (``by``) and each group
+    of names (e.g. ``("T1", "T2")``: two time constants of one model, which no data orders), the estimates are
+    matched to the truths in the order that gives the smallest total relative error, and ``estimate``,
+    ``rel_error``, ``abs_rel_error`` follow. Returns a copy."""
+    from itertools import permutations
+
+    out = p.copy()
+    for names in groups:
+        sel = out["name"].isin(names)
+        for _, idx in out[sel].groupby(by).groups.items():
+            rows = out.loc[idx]
+            if len(rows) != len(names):
+                continue
+            est, tru = rows["estimate"].to_numpy(float), rows["truth"].to_numpy(float)
+            best = min(permutations(range(len(est))), key=lambda perm: float(np.nansum(
+                np.abs(est[list(perm)] - tru) / np.abs(np.where(tru == 0, np.nan, tru)))))
+            new = est[list(best)]
+            out.loc[idx, "estimate"] = new
+            rel = (new - tru) / np.abs(np.where(tru == 0, np.nan, tru))
+            out.loc[idx, "rel_error"] = rel
+            if "abs_rel_error" in out:
+                out.loc[idx, "abs_rel_error"] = np.abs(rel)
+    return out

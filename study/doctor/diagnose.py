@@ -19,7 +19,14 @@
    candidates ranked again on top of it, and so on while a significant one remains. A step whose validation
    error, refined, is not at least ``min_improvement`` lower than the step before is rejected: the ladder stops
    and says why.
-6. **Divergence**: a replay that leaves the physical envelope (``fit.ENVELOPE``) or overflows is *diverged*:
+6. **The place** (``study.facility``): a candidate that needs what the training records' facility lacks (wind
+   indoors, a current in still water) is not tried; a fitted candidate that is physically implausible there (a
+   pond's current faster than the wind's drift) is rejected with the reason and never significant.
+7. **Set-up effects** (an effect whose class says ``setup_effect``: a yaw bias, a rudder zero offset) belong to
+   the set-up the training records were measured in: they are left out of the prediction of a record measured in
+   another facility or at another scale (``study.facility.other_setup``) unless ``keep_setup_effects``; the report
+   says which were left out, and of which records.
+8. **Divergence**: a replay that leaves the physical envelope (``fit.ENVELOPE``) or overflows is *diverged*:
    it has no error to compare. A diverged baseline gets a headline of its own and no missing effect; a
    diverged candidate is never significant.
 """
@@ -32,9 +39,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
+from .. import facility as fac
 from ..identify.effects import list_effects, registry
-from ..identify.with_effects import (CHANNELS, UNITS, EffectsProblem, diverged_records, record_error, record_errors,
-                                   validation_error)
+from ..identify.with_effects import (CHANNELS, UNITS, EffectsProblem, Fit, diverged_records, record_error,
+                                   record_errors, validation_error)
 
 #: the consistency test needs this many validation records (a paired t-test on fewer has no power)
 MIN_RECORDS_FOR_TEST = 3
@@ -52,6 +60,7 @@ class Options:
     checks: str = "error"  # the record checks that need the vessel: error | warn | off
     anchor: float | None = 0.3  # an identified model's coefficients anchored to the vessel config's, relative sd
     # (their prior: published, captive tests, CFD); None or 0: plain least squares
+    keep_setup_effects: bool = False  # keep set-up effects in predictions for another facility or scale
 
 
 @dataclass
@@ -87,6 +96,20 @@ def _names(records) -> list:
 
 def _mean_on(ev: Evaluation, records: list) -> float:
     return float(np.mean(ev.per_record(records))) if records else math.inf
+
+
+def without_effects(problem, fit: Fit, drop) -> Fit:
+    """``fit`` with the effects ``drop`` left out: their nonlinear parameters, linear unknowns and the coefficients
+    they alone freed removed (those return to the vessel config's values); everything else as identified."""
+    drop = [e for e in fit.effects if e in set(drop)]
+    if not drop:
+        return fit
+    own = problem.by_effect(fit)
+    keep = tuple(e for e in fit.effects if e not in drop)
+    kept_names = set(problem.model_free) | {k for e in keep for k in own.get(e, {})}
+    gone = {k for e in drop for k in own.get(e, {}) if k not in kept_names}
+    return Fit(keep, {k: v for k, v in fit.outer.items() if k not in gone},
+               {k: v for k, v in fit.coefs.items() if k not in gone}, fit.training_error, fit.rss, fit.evaluations)
 
 
 def compare(base: np.ndarray, cand: np.ndarray, opt: Options) -> dict:
@@ -168,9 +191,14 @@ class Doctor:
                                         self.opt.structure, self.effects,
                                         [n for j, n in enumerate(self.train_names) if j != i], self.opt.anchor)
                           for i in range(len(self.train))]
+        metas = lambda recs: [getattr(r, "meta", None) or {} for r in recs]  # noqa: E731
+        self.train_facilities = [fac.facility_of(m, vessel_cfg) for m in metas(self.train)]
+        self.train_setups = [fac.setup_of(m, vessel_cfg) for m in metas(self.train)]
+        self.val_setups = [fac.setup_of(m, vessel_cfg) for m in metas(self.validate)]
+        self.left_out = {}  # record -> (set-up effects left out of its prediction, why)
         self.not_applicable = {}
         for e, eff in self.effects.items():
-            why = eff.applies(self.problem)
+            why = eff.applies(self.problem) or fac.ruled_out(eff, self.train_facilities)
             if why:
                 if e in self.given:
                     raise ValueError(f"model effect '{e}' cannot act here: {why}")
@@ -195,17 +223,76 @@ class Doctor:
         errors, folds = {}, []
         if self.mode == "given":
             for name, df, info in zip(self.val_names, self.val_df, self.val_infos):
-                errors[name] = record_errors(df, self.problem.predict(fit, df, info), self.problem.floors)
+                errors[name] = record_errors(df, self.predict(self.problem, fit, df, info), self.problem.floors)
         else:
             for i, (name, df) in enumerate(zip(self.train_names, self.train_df)):
                 f = self.folds[i].fit(effects, start=fit.outer, grid=False)  # warm start from the full fit
                 folds.append(f)
-                errors[name] = record_errors(df, self.folds[i].predict(f, df, self.problem.infos[i]),
+                errors[name] = record_errors(df, self.predict(self.folds[i], f, df, self.problem.infos[i], i),
                                              self.problem.floors)
         ev = Evaluation(effects, fit, errors, validation_error(errors), fit.training_error,
                         time.perf_counter() - t0, folds)
         self.evaluations[key] = ev
         return ev
+
+    def setup_left_out(self, fit: Fit, name: str, fold: int | None = None) -> tuple:
+        """(set-up effects of ``fit`` left out of the prediction of record ``name``, why): those effects when the
+        record was measured in another facility or at another scale than the records the fit was trained on (the
+        fold's, held out), unless ``keep_setup_effects``; ((), None) otherwise."""
+        setup_effects = tuple(e for e in fit.effects if getattr(self.effects[e], "setup_effect", False))
+        if not setup_effects or self.opt.keep_setup_effects:
+            return (), None
+        if fold is None:
+            setup, training = self.val_setups[self.val_names.index(name)], self.train_setups
+        else:
+            setup, training = self.train_setups[fold], [s for j, s in enumerate(self.train_setups) if j != fold]
+        why = fac.other_setup(setup, training)
+        return (setup_effects, why) if why else ((), None)
+
+    def predict(self, problem, fit: Fit, df, info, fold: int | None = None):
+        """A record's replay by ``fit`` (``problem``: the full training problem, or the fold's when held out), the
+        set-up effects left out when the record is of another set-up (:meth:`setup_left_out`)."""
+        drop, why = self.setup_left_out(fit, info.name, fold)
+        if drop:
+            for e in drop:
+                self.left_out.setdefault(info.name, {})[e] = why
+            fit = without_effects(problem, fit, drop)
+        return problem.predict(fit, df, info)
+
+    def left_out_of(self, ev: Evaluation) -> dict:
+        """record -> why, for the records whose prediction by ``ev`` left set-up effects out."""
+        names = self.val_names if self.mode == "given" else self.train_names
+        out = {}
+        for k, name in enumerate(names):
+            fold = None if self.mode == "given" else k
+            fit = ev.fit if self.mode == "given" else (ev.fold_fits[k] if ev.fold_fits else ev.fit)
+            drop, why = self.setup_left_out(fit, name, fold)
+            if drop:
+                out[name] = why
+        return out
+
+    def setup_report(self, final: Evaluation) -> dict:
+        """The set-up effects of the final model, the records whose prediction left them out (and why), and the
+        sentences the report's notes carry."""
+        effects = [e for e in final.effects if getattr(self.effects[e], "setup_effect", False)]
+        left = {}
+        names = self.val_names if self.mode == "given" else self.train_names
+        for k, name in enumerate(names):
+            fold = None if self.mode == "given" else k
+            fit = final.fit if self.mode == "given" else (final.fold_fits[k] if final.fold_fits else final.fit)
+            drop, why = self.setup_left_out(fit, name, fold)
+            if drop:
+                left[name] = {"effects": list(drop), "why": why}
+        notes = []
+        if effects:
+            notes.append(f"{', '.join(effects)}: attributed to the test set-up (a rudder zero offset, an asymmetry "
+                         "of the set-up), not to the ship: " + (
+                             "kept in every prediction (keep_setup_effects=true)" if self.opt.keep_setup_effects
+                             else "left out of the prediction of a record from another facility or scale "
+                                  "(keep_setup_effects=true keeps it)"))
+        for name, d in left.items():
+            notes.append(f"{', '.join(d['effects'])} left out of the prediction of {name}: {d['why']}")
+        return {"effects": effects, "kept": bool(self.opt.keep_setup_effects), "left_out": left, "notes": notes}
 
     def rank(self, base: Evaluation, scored=None) -> tuple:
         """Every candidate not in ``base`` added on top of it, compared on the ``scored`` records (those whose
@@ -218,18 +305,32 @@ class Doctor:
             # estimate absorbs part of a second one, and must be free to give it back)
             evs[c] = self.evaluate(base.effects + (c,), start=base.fit.outer)
         _, _, rows = decide(base, evs, self.opt, scored)
+        plausible = dict(evs)
         for r in rows:
             ev = evs[r["effect"]]
+            eff = self.effects[r["effect"]]
             r.update({"parameters": self.problem.describe(ev.fit, [r["effect"]], model=False),
                       "training_error": ev.training_error, "seconds": ev.seconds, "note": "",
                       "diverged_records": ev.diverged,
-                      "stabilises": [x for x in base.diverged if x not in ev.diverged]})
+                      "stabilises": [x for x in base.diverged if x not in ev.diverged],
+                      "setup_effect": bool(getattr(eff, "setup_effect", False))})
             if ev.diverged:
                 r["note"] = f"diverges on {', '.join(ev.diverged)}"
             if r["stabilises"]:
                 r["note"] = (r["note"] + "; " if r["note"] else "") + \
                     f"keeps {', '.join(r['stabilises'])} stable (the baseline diverges there)"
-        return rows, evs
+            if r["setup_effect"]:
+                left = self.left_out_of(ev)
+                r["left_out_of"] = left
+                r["note"] = (r["note"] + "; " if r["note"] else "") + "a set-up effect (of the test set-up, not " \
+                    "of the ship)" + (f"; left out of the prediction of {', '.join(left)} ({next(iter(left.values()))})"
+                                      if left else "")
+            why = fac.implausible(eff, r["parameters"], self.train_facilities, self.train_df)
+            if why:  # physically implausible where the records were measured: never significant, never named
+                r.update(implausible=why, significant=False)
+                r["note"] = (r["note"] + "; " if r["note"] else "") + f"rejected: {why}"
+                plausible.pop(r["effect"])
+        return rows, plausible
 
     def stability(self, base: Evaluation, evs: dict, named, ambiguous, scored=None) -> dict:
         """The step's verdict repeated with each (scored) validation record left out: in how many it is the
@@ -416,6 +517,11 @@ class Doctor:
             if 1 in stab and stab[1]["k"] is not None:
                 verdict += f" (the same in {stab[1]['k']} of {stab[1]['n']} with one validation record left out)"
         params_units = self.problem.units(tuple(self.effects))
+        setup = self.setup_report(final)
+        notes = list(r["notes"]) + setup["notes"]
+        implausible = [c for c in r["ranking"] if c.get("implausible")]
+        for c in implausible:
+            notes.append(f"candidate {c['effect']} rejected as physically implausible here: {c['implausible']}")
         return {
             "verdict": verdict,
             "baseline": {"validation_error": base.validation_error, "training_error": base.training_error,
@@ -435,7 +541,10 @@ class Doctor:
             "units": params_units,
             "identifiability": self.problem.identifiability(base.fit),
             "errors_table": errs_rows(),
-            "notes": r["notes"],
+            "notes": notes,
+            "setup_effects": {k: v for k, v in setup.items() if k != "notes"},
+            "facilities": {n: f for n, f in zip(self.train_names, self.train_facilities)} | (
+                {n: s[0] for n, s in zip(self.val_names, self.val_setups)} if self.mode == "given" else {}),
             "mode": self.mode,
             "train": self.train_names,
             "validate": self.val_names if self.mode == "given" else [],
@@ -487,10 +596,10 @@ def predictions(doctor: "Doctor", ev: Evaluation) -> dict:
     out = {}
     if doctor.mode == "given":
         for name, df, info in zip(doctor.val_names, doctor.val_df, doctor.val_infos):
-            out[name] = doctor.problem.predict(ev.fit, df, info)
+            out[name] = doctor.predict(doctor.problem, ev.fit, df, info)
     else:
         for i, (name, df) in enumerate(zip(doctor.train_names, doctor.train_df)):
-            out[name] = (doctor.folds[i].predict(ev.fold_fits[i], df, doctor.problem.infos[i])
+            out[name] = (doctor.predict(doctor.folds[i], ev.fold_fits[i], df, doctor.problem.infos[i], i)
                          if ev.fold_fits else None)
     return out
 
@@ -503,16 +612,16 @@ def manoeuvre_predictions(doctor: "Doctor", ev: Evaluation, whole: dict) -> dict
 
     out = dict(whole)
     if doctor.mode == "given":
-        items = [(n, df, info, doctor.problem, ev.fit) for n, df, info in
+        items = [(n, df, info, doctor.problem, ev.fit, None) for n, df, info in
                  zip(doctor.val_names, doctor.val_df, doctor.val_infos)]
     else:
-        items = [(n, df, doctor.problem.infos[i], doctor.folds[i], ev.fold_fits[i] if ev.fold_fits else None)
+        items = [(n, df, doctor.problem.infos[i], doctor.folds[i], ev.fold_fits[i] if ev.fold_fits else None, i)
                  for i, (n, df) in enumerate(zip(doctor.train_names, doctor.train_df))]
-    for name, df, info, problem, fit in items:
+    for name, df, info, problem, fit, fold in items:
         t0 = manoeuvre_start(df)
         if t0 is not None and fit is not None:
             cut = df[df["time"] >= t0 - 1e-9].reset_index(drop=True)
-            out[name] = problem.predict(fit, cut, info) if len(cut) >= 10 else None
+            out[name] = doctor.predict(problem, fit, cut, info, fold) if len(cut) >= 10 else None
     return out
 
 

@@ -199,3 +199,22 @@ def test_another_scale_is_another_setup():
     assert fac.other_setup(("towing_tank", None), [("towing_tank", "1:45.714")]) is None
     assert fac.other_setup(("pond", None), [(None, None)]) is None
 
+
+def test_a_turn_predicted_elsewhere_leaves_the_setup_effect_out_unless_asked(biased):
+    from study.doctor.turn_prediction import predict_turn
+    from study.identify.effects import registry
+    from study.identify.with_effects import EffectsProblem
+
+    pb = EffectsProblem(VESSEL, KNOWN, tagged(biased[0], "t", facility="towing_tank"), effects=registry(["yaw_bias"]))
+    fit = pb.fit(("yaw_bias",))
+    bare = predict_turn(pb, without_effects(pb, fit, ["yaw_bias"]), draws=0)
+    elsewhere = predict_turn(pb, fit, draws=0)  # a turn nobody measured: not the training set-up
+    other = predict_turn(pb, fit, draws=0, facility="basin")
+    same = predict_turn(pb, fit, draws=0, facility="towing_tank")
+    kept = predict_turn(pb, fit, draws=0, facility="basin", keep_setup_effects=True)
+    assert elsewhere["setup_left_out"] == other["setup_left_out"] == ["yaw_bias"]
+    assert "another facility (basin; trained in towing_tank)" == other["setup_why"]
+    assert same["setup_left_out"] == kept["setup_left_out"] == []
+    td = lambda p: p["tactical_diameter_L"]  # noqa: E731
+    assert td(elsewhere) == td(other) == td(bare)
+    assert td(same) == td(kept) != td(bare)

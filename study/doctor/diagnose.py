@@ -697,7 +697,7 @@ def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: 
                    "python -m study.diagnose", "vessel": vessel, "model": model,
                    "structure": doctor.problem.structure.name, "worst_windows": windows,
                    "catalogue": catalogue_rows(doctor), "figures": listing, "maneuver_metrics": mm,
-                   "conventions": CONVENTIONS, "definitions": DEFINITIONS}
+                   "conventions": CONVENTIONS, "definitions": DEFINITIONS, "provenance": provenance(doctor)}
     (out / "report.json").write_text(json.dumps(html_report, indent=1, allow_nan=True, default=float),
                                      encoding="utf-8")
     (out / "report.html").write_text(render_html(html_report, figs), encoding="utf-8")
@@ -722,6 +722,66 @@ DEFINITIONS = {
     "diverged": "a replay that overflows or leaves the envelope (speed over 5 U0, yaw rate over 20 U0/L)",
     "track error": "RMS distance between replayed and measured positions [m]; its NRMSE is over the track's extent",
 }
+
+
+def record_sha256(record) -> tuple:
+    """(sha256 hex digest, of what): of the record's file as read when it has one, else of its data as CSV."""
+    import hashlib
+    from pathlib import Path
+
+    path = getattr(record, "path", None)
+    if path and Path(path).is_file():
+        h = hashlib.sha256()
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+        return h.hexdigest(), "file"
+    df = record.data if hasattr(record, "data") else record
+    return hashlib.sha256(df.to_csv(index=False).encode()).hexdigest(), "data (CSV, no file)"
+
+
+def git_revision() -> dict:
+    """The package's git revision and whether its tracked files differ from it; None when it is not a checkout."""
+    import subprocess
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    try:
+        rev = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
+                             timeout=10)
+        if rev.returncode != 0:
+            return {"revision": None, "modified": None}
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=30)
+        return {"revision": rev.stdout.strip(), "modified": bool(dirty.stdout.strip())}
+    except (OSError, subprocess.SubprocessError):
+        return {"revision": None, "modified": None}
+
+
+def provenance(doctor: "Doctor", command: str | None = None) -> dict:
+    """What made the report: package and version, git revision, command line, date (UTC), and each record's
+    sha256 (its file's bytes when the report is written; a record without a file: its data as CSV)."""
+    import shlex
+    import sys
+    from datetime import datetime, timezone
+    from importlib import metadata
+
+    try:
+        version = metadata.version("study")
+    except metadata.PackageNotFoundError:
+        version = None
+    if command is None:
+        argv = list(getattr(sys, "orig_argv", None) or sys.argv)
+        command = shlex.join(argv)
+    records = []
+    for role, recs, names in (("train", doctor.train, doctor.train_names),
+                              ("validate", doctor.validate, doctor.val_names if doctor.validate else [])):
+        for r, name in zip(recs, names):
+            digest, of = record_sha256(r)
+            records.append({"role": role, "name": name, "path": getattr(r, "path", None), "sha256": digest,
+                            "sha256_of": of})
+    return {"package": "study", "version": version, **git_revision(), "command": command,
+            "date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "records": records}
 
 
 def catalogue_rows(doctor: "Doctor") -> list:

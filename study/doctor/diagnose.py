@@ -625,6 +625,45 @@ def manoeuvre_predictions(doctor: "Doctor", ev: Evaluation, whole: dict) -> dict
     return out
 
 
+def _metrics_error(rows: list, col: str) -> tuple:
+    """(mean over the finite metrics of |predicted - measured| / |measured|, their count)."""
+    errs = [abs(r[col] - r["measured"]) / abs(r["measured"]) for r in rows
+            if np.isfinite(r.get(col, np.nan)) and np.isfinite(r["measured"]) and r["measured"] != 0]
+    return (float(np.mean(errs)) if errs else math.nan), len(errs)
+
+
+def candidate_metrics(doctor: "Doctor", rep: dict, meas: dict, mb: dict) -> None:
+    """Beside each ranked candidate's validation error, its effect on the validation manoeuvres' metrics (tactical
+    diameter, advance, overshoots...: ``study.maneuver_metrics``): the mean relative error of the metrics the
+    baseline and the candidate can both be measured on, and a note when the candidate lowers the NRMSE but worsens
+    the metrics. Without turning circles or zigzags among the validation records a row gets none."""
+    from ..maneuver_metrics import maneuver_metrics
+
+    given = tuple(doctor.result["base"].effects)
+    for row in rep["ranking"]:
+        ev = doctor.evaluations.get((doctor.key(given + (row["effect"],)), False, False))
+        if ev is None:
+            continue
+        mc = manoeuvre_predictions(doctor, ev, predictions(doctor, ev))
+        rows = [m for name, df in meas.items() for m in maneuver_metrics(name, df, mb.get(name), mc.get(name),
+                                                                         doctor.problem.L)
+                if not m["metric"].endswith("_L")]  # the same metric in ship lengths: counted once
+        both = [m for m in rows if np.isfinite(m["baseline"]) and np.isfinite(m["final"])]
+        e0, n = _metrics_error(both, "baseline")
+        e1, _ = _metrics_error(both, "final")
+        if not n:
+            continue
+        worse = [f"{m['record']}: {m['metric']}" for m in both if np.isfinite(m["measured"])
+                 and abs(m["final"] - m["measured"]) > abs(m["baseline"] - m["measured"])]
+        row["metrics"] = {"n": n, "baseline_error": e0, "error": e1, "worse": worse}
+        lowers = row.get("improvement") is not None and row["improvement"] > 0
+        if lowers and e1 > e0:
+            row["metrics_worse"] = True
+            row["note"] = (row["note"] + "; " if row.get("note") else "") + (
+                f"lowers the NRMSE but worsens the manoeuvre metrics (mean relative error {100 * e0:.1f} % -> "
+                f"{100 * e1:.1f} % over {n}; worse: {', '.join(worse[:4])}{', ...' if len(worse) > 4 else ''})")
+
+
 def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: bool = False) -> dict:
     """Write ``report.json``, ``report.html`` and the figures (``figures/*.png``) into ``out_dir``; returns the
     report. Refuses to replace an existing report unless ``overwrite``."""
@@ -691,6 +730,7 @@ def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: 
     mf = mb if final is base else manoeuvre_predictions(doctor, final, pf)  # no effect added: the same replays
     for name, df in meas.items():
         mm += maneuver_metrics(name, df, mb.get(name), mf.get(name), doctor.problem.L)
+    candidate_metrics(doctor, rep, meas, mb)
     for name, data in figs.items():
         (out / "figures" / name).write_bytes(data)
     html_report = {**_jsonable(rep), "title": f"Model doctor: {model} on {vessel}", "created_by":

@@ -569,9 +569,14 @@ def _ranking(r: dict) -> str:
         on = [x for x in div_recs if x != "?"]
         if div and on:
             val += f'<br><span class="detail">on {_names(on)}</span>'
+        mt = _dict(c.get("metrics"))
+        e0, e1 = _finite(mt.get("baseline_error")), _finite(mt.get("error"))
+        mcell = (f'{fmt_pct(e1)}<br><span class="detail">baseline {fmt_pct(e0)}</span>'
+                 if e0 is not None and e1 is not None else NA)
         rows.append(f'<tr class="{cls}"><td class="num">{i}</td><td class="effect">{_e(c.get("effect"))}</td>'
                     f'<td class="num">{val}</td>'
                     f'<td class="num">{_pct(c.get("improvement"), div)}</td>'
+                    f'<td class="num metrics">{mcell}</td>'
                     f'<td>{mark}</td><td class="num">{_fmt_p(c.get("p_value"))}</td>'
                     f'<td class="params">{_params(c.get("parameters"), units, notes)}</td>'
                     f'<td>{_e(c.get("note"))}</td></tr>')
@@ -597,14 +602,19 @@ def _ranking(r: dict) -> str:
         return _section("Candidate effects", base_line + '<p class="muted">No candidate was tried.</p>' + na_html,
                         "candidates")
     table = ('<table id="ranking" class="ranking">\n<thead><tr><th class="num">#</th><th>Effect</th>'
-             '<th class="num">Validation error [-]</th><th class="num">Improvement</th><th>Significant</th>'
+             '<th class="num">Validation error [-]</th><th class="num">Improvement</th>'
+             '<th class="num">Manoeuvre metrics error</th><th>Significant</th>'
              '<th class="num">p&#8209;value</th><th>Identified parameters [unit]</th><th>Note</th></tr></thead>\n'
              '<tbody>\n' + "\n".join(rows) + "\n</tbody></table>")
     legend = ('<p class="legend">Candidates ranked by out-of-sample improvement: each effect is added alone to '
               'the baseline, identified on the training records and judged on the validation records. '
               '<span class="sig">&#10003; significant</span> rows are highlighted.</p>')
     extra = [("p-value", "of the paired t-test of the per-record validation errors against the baseline's "
-                         "(n/a when there are too few validation records to run it)")]
+                         "(n/a when there are too few validation records to run it)"),
+             ("manoeuvre metrics error", "the mean over the validation turning circles' and zigzags' metrics "
+                                         "(tactical diameter, advance, transfer, overshoots...) of |predicted - "
+                                         "measured| / |measured|, with the candidate (and, below, the baseline); "
+                                         "n/a without such records")]
     foot = _defs(r, ["validation error", "improvement"] + (["diverged"] if any_div else []), extra)
     return _section("Candidate effects", base_line + legend + table + _unit_notes(notes) + foot + na_html,
                     "candidates")

@@ -64,13 +64,11 @@ POND_DRIFT_SHARE = 2 * 0.035
 
 def check(value, where: str) -> str:
     """A facility name as given (``value``), or a ``ValueError`` in one line naming ``where`` (the file) and what
-    was expected. ``None`` passes (no facility stated)."""
-    from .schema import SchemaError
-
+    was expected (``study.schema`` raises it as its ``SchemaError``). ``None`` passes (no facility stated)."""
     if value is None:
         return None
     if not isinstance(value, str) or value not in FACILITIES:
-        raise SchemaError(f"{where}: facility: {value}: expected one of {', '.join(FACILITIES)}")
+        raise ValueError(f"{where}: facility: {value}: expected one of {', '.join(FACILITIES)}")
     return value
 
 

@@ -170,7 +170,10 @@ def check_meta(meta: dict, path=None) -> None:
     from .facility import check
 
     if "facility" in (meta or {}):
-        check(meta["facility"], _where(path))
+        try:
+            check(meta["facility"], _where(path))
+        except ValueError as exc:
+            raise SchemaError(str(exc)) from None
 
 
 def from_arrays(time, u, v, r, x0, y0, psi, delta, n, **optional) -> pd.DataFrame:

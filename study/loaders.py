@@ -17,6 +17,10 @@ where it looked when nothing is there.
   velocities and delta > 0 to PORT in the files: converted here. The CPMC reference point is not stated in
   the report excerpt we have; positions and velocities are taken as given (assumed midship, labelled in meta).
 
+Each record's metadata name its facility (``study.facility``): Esso Osaka's ``pond`` (the Inukai pond of Osaka
+University, outdoors, SOURCE.md), HSVA's ``towing_tank`` (HSVA's large towing tank, 300 x 18 x 6 m, the CPMC
+carriage following the model; SOURCE.md), with its ``scale`` 1:45.714.
+
 :func:`load_records` reads the records a pattern names (a file, folder, glob or comma-separated list of them), schema
 files and the real datasets' own formats alike (the doctor's reading; a run on files reads them one by one).
 """
@@ -133,6 +137,7 @@ def load_esso_osaka(path, trim: bool = False) -> Record:
         "name": path.stem, "vessel": "esso_osaka", "maneuver": kind, "source": "Esso Osaka 3 m model, "
         "Osaka University free-running tests (Wakita et al. 2022; Miyauchi et al. 2022), CC BY-NC-SA 4.0",
         "reference_point": "midship", "x0_axis": "pond x0 (not north)", "trimmed": bool(trim),
+        "facility": "pond",  # SOURCE.md: Inukai pond, Osaka University, outdoors (with measured wind)
     }
     return Record(data=df, meta=meta, path=str(path))
 
@@ -172,6 +177,8 @@ def load_kvlcc2_hsva(path) -> Record:
         "source": "HSVA free-running tests of KVLCC2 (SIMMAN 2008; Stern et al. 2011), via Alexandersson "
                   "et al. 2022", "reference_point": "as measured by the CPMC (assumed midship)",
         "roll_deg_column_dropped": True,
+        # SOURCE.md: HSVA's large towing tank (300 x 18 x 6 m), the CPMC carriage following the model; scale 1:45.714
+        "facility": "towing_tank", "scale": "1:45.714",
     }
     return Record(data=df, meta=meta, path=str(path))
 

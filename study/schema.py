@@ -163,6 +163,19 @@ def validate(df: pd.DataFrame, path=None, min_samples: int = 20, hint: str = "",
         warnings.warn(f"{where}: {f.message}", RecordWarning, stacklevel=2)
 
 
+def check_meta(meta: dict, path=None) -> None:
+    """Metadata keys with a fixed vocabulary: ``facility`` (where the record was measured: one of
+    ``study.facility.FACILITIES``). An unknown value raises :class:`SchemaError` naming the file, the key, the value
+    and what was expected."""
+    from .facility import check
+
+    if "facility" in (meta or {}):
+        try:
+            check(meta["facility"], _where(path))
+        except ValueError as exc:
+            raise SchemaError(str(exc)) from None
+
+
 def from_arrays(time, u, v, r, x0, y0, psi, delta, n, **optional) -> pd.DataFrame:
     cols = dict(time=time, u=u, v=v, r=r, x0=x0, y0=y0, psi=psi, delta=delta, n=n)
     for k, val in optional.items():
@@ -247,6 +260,7 @@ def read_record(path, min_samples: int = 20, states: str = "measured", state_opt
             df = table.to_pandas()
         except Exception as exc:  # noqa: BLE001 - pyarrow types pandas cannot hold
             raise SchemaError(f"{path}: its table cannot be read into columns ({exc})") from exc
+    check_meta(meta, path)
     lacking = [c for c in ESTIMABLE if c not in df.columns]
     if states == "measured" or (states == "auto" and not lacking):
         hint = ""
@@ -308,6 +322,7 @@ def write_record(record: Record, path, overwrite: bool = False) -> Path:
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; refusing to overwrite it (pass overwrite=True / overwrite=true)")
     validate(record.data, path)
+    check_meta(record.meta, path)
     meta = _jsonable(record.meta)
     tmp = path.parent / f".{path.name}.{uuid.uuid4().hex[:8]}.tmp"
     try:

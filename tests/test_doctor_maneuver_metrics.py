@@ -224,7 +224,8 @@ def test_the_doctor_replays_a_record_with_an_approach_from_the_manoeuvre_start()
         return replayed(VESSEL, df)
 
     doctor = SimpleNamespace(mode="given", val_names=["approach", "whole"], val_df=[approach, whole],
-                             val_infos=["approach", "whole"], problem=SimpleNamespace(predict=predict))
+                             val_infos=["approach", "whole"], problem=SimpleNamespace(predict=predict),
+                             predict=lambda problem, fit, df, info, fold=None: problem.predict(fit, df, info))
     got = manoeuvre_predictions(doctor, SimpleNamespace(fit="fit"), {"approach": "old", "whole": "kept"})
     t0 = manoeuvre_start(approach)
     assert 30.0 < t0 < 40.5

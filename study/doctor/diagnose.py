@@ -19,7 +19,14 @@
    candidates ranked again on top of it, and so on while a significant one remains. A step whose validation
    error, refined, is not at least ``min_improvement`` lower than the step before is rejected: the ladder stops
    and says why.
-6. **Divergence**: a replay that leaves the physical envelope (``fit.ENVELOPE``) or overflows is *diverged*:
+6. **The place** (``study.facility``): a candidate that needs what the training records' facility lacks (wind
+   indoors, a current in still water) is not tried; a fitted candidate that is physically implausible there (a
+   pond's current faster than the wind's drift) is rejected with the reason and never significant.
+7. **Set-up effects** (an effect whose class says ``setup_effect``: a yaw bias, a rudder zero offset) belong to
+   the set-up the training records were measured in: they are left out of the prediction of a record measured in
+   another facility or at another scale (``study.facility.other_setup``) unless ``keep_setup_effects``; the report
+   says which were left out, and of which records.
+8. **Divergence**: a replay that leaves the physical envelope (``fit.ENVELOPE``) or overflows is *diverged*:
    it has no error to compare. A diverged baseline gets a headline of its own and no missing effect; a
    diverged candidate is never significant.
 """
@@ -32,9 +39,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import stats
 
+from .. import facility as fac
 from ..identify.effects import list_effects, registry
-from ..identify.with_effects import (CHANNELS, UNITS, EffectsProblem, diverged_records, record_error, record_errors,
-                                   validation_error)
+from ..identify.with_effects import (CHANNELS, UNITS, EffectsProblem, Fit, diverged_records, record_error,
+                                   record_errors, validation_error)
 
 #: the consistency test needs this many validation records (a paired t-test on fewer has no power)
 MIN_RECORDS_FOR_TEST = 3
@@ -52,6 +60,7 @@ class Options:
     checks: str = "error"  # the record checks that need the vessel: error | warn | off
     anchor: float | None = 0.3  # an identified model's coefficients anchored to the vessel config's, relative sd
     # (their prior: published, captive tests, CFD); None or 0: plain least squares
+    keep_setup_effects: bool = False  # keep set-up effects in predictions for another facility or scale
 
 
 @dataclass
@@ -87,6 +96,20 @@ def _names(records) -> list:
 
 def _mean_on(ev: Evaluation, records: list) -> float:
     return float(np.mean(ev.per_record(records))) if records else math.inf
+
+
+def without_effects(problem, fit: Fit, drop) -> Fit:
+    """``fit`` with the effects ``drop`` left out: their nonlinear parameters, linear unknowns and the coefficients
+    they alone freed removed (those return to the vessel config's values); everything else as identified."""
+    drop = [e for e in fit.effects if e in set(drop)]
+    if not drop:
+        return fit
+    own = problem.by_effect(fit)
+    keep = tuple(e for e in fit.effects if e not in drop)
+    kept_names = set(problem.model_free) | {k for e in keep for k in own.get(e, {})}
+    gone = {k for e in drop for k in own.get(e, {}) if k not in kept_names}
+    return Fit(keep, {k: v for k, v in fit.outer.items() if k not in gone},
+               {k: v for k, v in fit.coefs.items() if k not in gone}, fit.training_error, fit.rss, fit.evaluations)
 
 
 def compare(base: np.ndarray, cand: np.ndarray, opt: Options) -> dict:
@@ -168,9 +191,14 @@ class Doctor:
                                         self.opt.structure, self.effects,
                                         [n for j, n in enumerate(self.train_names) if j != i], self.opt.anchor)
                           for i in range(len(self.train))]
+        metas = lambda recs: [getattr(r, "meta", None) or {} for r in recs]  # noqa: E731
+        self.train_facilities = [fac.facility_of(m, vessel_cfg) for m in metas(self.train)]
+        self.train_setups = [fac.setup_of(m, vessel_cfg) for m in metas(self.train)]
+        self.val_setups = [fac.setup_of(m, vessel_cfg) for m in metas(self.validate)]
+        self.left_out = {}  # record -> (set-up effects left out of its prediction, why)
         self.not_applicable = {}
         for e, eff in self.effects.items():
-            why = eff.applies(self.problem)
+            why = eff.applies(self.problem) or fac.ruled_out(eff, self.train_facilities)
             if why:
                 if e in self.given:
                     raise ValueError(f"model effect '{e}' cannot act here: {why}")
@@ -195,17 +223,76 @@ class Doctor:
         errors, folds = {}, []
         if self.mode == "given":
             for name, df, info in zip(self.val_names, self.val_df, self.val_infos):
-                errors[name] = record_errors(df, self.problem.predict(fit, df, info), self.problem.floors)
+                errors[name] = record_errors(df, self.predict(self.problem, fit, df, info), self.problem.floors)
         else:
             for i, (name, df) in enumerate(zip(self.train_names, self.train_df)):
                 f = self.folds[i].fit(effects, start=fit.outer, grid=False)  # warm start from the full fit
                 folds.append(f)
-                errors[name] = record_errors(df, self.folds[i].predict(f, df, self.problem.infos[i]),
+                errors[name] = record_errors(df, self.predict(self.folds[i], f, df, self.problem.infos[i], i),
                                              self.problem.floors)
         ev = Evaluation(effects, fit, errors, validation_error(errors), fit.training_error,
                         time.perf_counter() - t0, folds)
         self.evaluations[key] = ev
         return ev
+
+    def setup_left_out(self, fit: Fit, name: str, fold: int | None = None) -> tuple:
+        """(set-up effects of ``fit`` left out of the prediction of record ``name``, why): those effects when the
+        record was measured in another facility or at another scale than the records the fit was trained on (the
+        fold's, held out), unless ``keep_setup_effects``; ((), None) otherwise."""
+        setup_effects = tuple(e for e in fit.effects if getattr(self.effects[e], "setup_effect", False))
+        if not setup_effects or self.opt.keep_setup_effects:
+            return (), None
+        if fold is None:
+            setup, training = self.val_setups[self.val_names.index(name)], self.train_setups
+        else:
+            setup, training = self.train_setups[fold], [s for j, s in enumerate(self.train_setups) if j != fold]
+        why = fac.other_setup(setup, training)
+        return (setup_effects, why) if why else ((), None)
+
+    def predict(self, problem, fit: Fit, df, info, fold: int | None = None):
+        """A record's replay by ``fit`` (``problem``: the full training problem, or the fold's when held out), the
+        set-up effects left out when the record is of another set-up (:meth:`setup_left_out`)."""
+        drop, why = self.setup_left_out(fit, info.name, fold)
+        if drop:
+            for e in drop:
+                self.left_out.setdefault(info.name, {})[e] = why
+            fit = without_effects(problem, fit, drop)
+        return problem.predict(fit, df, info)
+
+    def left_out_of(self, ev: Evaluation) -> dict:
+        """record -> why, for the records whose prediction by ``ev`` left set-up effects out."""
+        names = self.val_names if self.mode == "given" else self.train_names
+        out = {}
+        for k, name in enumerate(names):
+            fold = None if self.mode == "given" else k
+            fit = ev.fit if self.mode == "given" else (ev.fold_fits[k] if ev.fold_fits else ev.fit)
+            drop, why = self.setup_left_out(fit, name, fold)
+            if drop:
+                out[name] = why
+        return out
+
+    def setup_report(self, final: Evaluation) -> dict:
+        """The set-up effects of the final model, the records whose prediction left them out (and why), and the
+        sentences the report's notes carry."""
+        effects = [e for e in final.effects if getattr(self.effects[e], "setup_effect", False)]
+        left = {}
+        names = self.val_names if self.mode == "given" else self.train_names
+        for k, name in enumerate(names):
+            fold = None if self.mode == "given" else k
+            fit = final.fit if self.mode == "given" else (final.fold_fits[k] if final.fold_fits else final.fit)
+            drop, why = self.setup_left_out(fit, name, fold)
+            if drop:
+                left[name] = {"effects": list(drop), "why": why}
+        notes = []
+        if effects:
+            notes.append(f"{', '.join(effects)}: attributed to the test set-up (a rudder zero offset, an asymmetry "
+                         "of the set-up), not to the ship: " + (
+                             "kept in every prediction (keep_setup_effects=true)" if self.opt.keep_setup_effects
+                             else "left out of the prediction of a record from another facility or scale "
+                                  "(keep_setup_effects=true keeps it)"))
+        for name, d in left.items():
+            notes.append(f"{', '.join(d['effects'])} left out of the prediction of {name}: {d['why']}")
+        return {"effects": effects, "kept": bool(self.opt.keep_setup_effects), "left_out": left, "notes": notes}
 
     def rank(self, base: Evaluation, scored=None) -> tuple:
         """Every candidate not in ``base`` added on top of it, compared on the ``scored`` records (those whose
@@ -218,18 +305,32 @@ class Doctor:
             # estimate absorbs part of a second one, and must be free to give it back)
             evs[c] = self.evaluate(base.effects + (c,), start=base.fit.outer)
         _, _, rows = decide(base, evs, self.opt, scored)
+        plausible = dict(evs)
         for r in rows:
             ev = evs[r["effect"]]
+            eff = self.effects[r["effect"]]
             r.update({"parameters": self.problem.describe(ev.fit, [r["effect"]], model=False),
                       "training_error": ev.training_error, "seconds": ev.seconds, "note": "",
                       "diverged_records": ev.diverged,
-                      "stabilises": [x for x in base.diverged if x not in ev.diverged]})
+                      "stabilises": [x for x in base.diverged if x not in ev.diverged],
+                      "setup_effect": bool(getattr(eff, "setup_effect", False))})
             if ev.diverged:
                 r["note"] = f"diverges on {', '.join(ev.diverged)}"
             if r["stabilises"]:
                 r["note"] = (r["note"] + "; " if r["note"] else "") + \
                     f"keeps {', '.join(r['stabilises'])} stable (the baseline diverges there)"
-        return rows, evs
+            if r["setup_effect"]:
+                left = self.left_out_of(ev)
+                r["left_out_of"] = left
+                r["note"] = (r["note"] + "; " if r["note"] else "") + "a set-up effect (of the test set-up, not " \
+                    "of the ship)" + (f"; left out of the prediction of {', '.join(left)} ({next(iter(left.values()))})"
+                                      if left else "")
+            why = fac.implausible(eff, r["parameters"], self.train_facilities, self.train_df)
+            if why:  # physically implausible where the records were measured: never significant, never named
+                r.update(implausible=why, significant=False)
+                r["note"] = (r["note"] + "; " if r["note"] else "") + f"rejected: {why}"
+                plausible.pop(r["effect"])
+        return rows, plausible
 
     def stability(self, base: Evaluation, evs: dict, named, ambiguous, scored=None) -> dict:
         """The step's verdict repeated with each (scored) validation record left out: in how many it is the
@@ -416,6 +517,11 @@ class Doctor:
             if 1 in stab and stab[1]["k"] is not None:
                 verdict += f" (the same in {stab[1]['k']} of {stab[1]['n']} with one validation record left out)"
         params_units = self.problem.units(tuple(self.effects))
+        setup = self.setup_report(final)
+        notes = list(r["notes"]) + setup["notes"]
+        implausible = [c for c in r["ranking"] if c.get("implausible")]
+        for c in implausible:
+            notes.append(f"candidate {c['effect']} rejected as physically implausible here: {c['implausible']}")
         return {
             "verdict": verdict,
             "baseline": {"validation_error": base.validation_error, "training_error": base.training_error,
@@ -435,7 +541,10 @@ class Doctor:
             "units": params_units,
             "identifiability": self.problem.identifiability(base.fit),
             "errors_table": errs_rows(),
-            "notes": r["notes"],
+            "notes": notes,
+            "setup_effects": {k: v for k, v in setup.items() if k != "notes"},
+            "facilities": {n: f for n, f in zip(self.train_names, self.train_facilities)} | (
+                {n: s[0] for n, s in zip(self.val_names, self.val_setups)} if self.mode == "given" else {}),
             "mode": self.mode,
             "train": self.train_names,
             "validate": self.val_names if self.mode == "given" else [],
@@ -487,10 +596,10 @@ def predictions(doctor: "Doctor", ev: Evaluation) -> dict:
     out = {}
     if doctor.mode == "given":
         for name, df, info in zip(doctor.val_names, doctor.val_df, doctor.val_infos):
-            out[name] = doctor.problem.predict(ev.fit, df, info)
+            out[name] = doctor.predict(doctor.problem, ev.fit, df, info)
     else:
         for i, (name, df) in enumerate(zip(doctor.train_names, doctor.train_df)):
-            out[name] = (doctor.folds[i].predict(ev.fold_fits[i], df, doctor.problem.infos[i])
+            out[name] = (doctor.predict(doctor.folds[i], ev.fold_fits[i], df, doctor.problem.infos[i], i)
                          if ev.fold_fits else None)
     return out
 
@@ -503,17 +612,56 @@ def manoeuvre_predictions(doctor: "Doctor", ev: Evaluation, whole: dict) -> dict
 
     out = dict(whole)
     if doctor.mode == "given":
-        items = [(n, df, info, doctor.problem, ev.fit) for n, df, info in
+        items = [(n, df, info, doctor.problem, ev.fit, None) for n, df, info in
                  zip(doctor.val_names, doctor.val_df, doctor.val_infos)]
     else:
-        items = [(n, df, doctor.problem.infos[i], doctor.folds[i], ev.fold_fits[i] if ev.fold_fits else None)
+        items = [(n, df, doctor.problem.infos[i], doctor.folds[i], ev.fold_fits[i] if ev.fold_fits else None, i)
                  for i, (n, df) in enumerate(zip(doctor.train_names, doctor.train_df))]
-    for name, df, info, problem, fit in items:
+    for name, df, info, problem, fit, fold in items:
         t0 = manoeuvre_start(df)
         if t0 is not None and fit is not None:
             cut = df[df["time"] >= t0 - 1e-9].reset_index(drop=True)
-            out[name] = problem.predict(fit, cut, info) if len(cut) >= 10 else None
+            out[name] = doctor.predict(problem, fit, cut, info, fold) if len(cut) >= 10 else None
     return out
+
+
+def _metrics_error(rows: list, col: str) -> tuple:
+    """(mean over the finite metrics of |predicted - measured| / |measured|, their count)."""
+    errs = [abs(r[col] - r["measured"]) / abs(r["measured"]) for r in rows
+            if np.isfinite(r.get(col, np.nan)) and np.isfinite(r["measured"]) and r["measured"] != 0]
+    return (float(np.mean(errs)) if errs else math.nan), len(errs)
+
+
+def candidate_metrics(doctor: "Doctor", rep: dict, meas: dict, mb: dict) -> None:
+    """Beside each ranked candidate's validation error, its effect on the validation manoeuvres' metrics (tactical
+    diameter, advance, overshoots...: ``study.maneuver_metrics``): the mean relative error of the metrics the
+    baseline and the candidate can both be measured on, and a note when the candidate lowers the NRMSE but worsens
+    the metrics. Without turning circles or zigzags among the validation records a row gets none."""
+    from ..maneuver_metrics import maneuver_metrics
+
+    given = tuple(doctor.result["base"].effects)
+    for row in rep["ranking"]:
+        ev = doctor.evaluations.get((doctor.key(given + (row["effect"],)), False, False))
+        if ev is None:
+            continue
+        mc = manoeuvre_predictions(doctor, ev, predictions(doctor, ev))
+        rows = [m for name, df in meas.items() for m in maneuver_metrics(name, df, mb.get(name), mc.get(name),
+                                                                         doctor.problem.L)
+                if not m["metric"].endswith("_L")]  # the same metric in ship lengths: counted once
+        both = [m for m in rows if np.isfinite(m["baseline"]) and np.isfinite(m["final"])]
+        e0, n = _metrics_error(both, "baseline")
+        e1, _ = _metrics_error(both, "final")
+        if not n:
+            continue
+        worse = [f"{m['record']}: {m['metric']}" for m in both if np.isfinite(m["measured"])
+                 and abs(m["final"] - m["measured"]) > abs(m["baseline"] - m["measured"])]
+        row["metrics"] = {"n": n, "baseline_error": e0, "error": e1, "worse": worse}
+        lowers = row.get("improvement") is not None and row["improvement"] > 0
+        if lowers and e1 > e0:
+            row["metrics_worse"] = True
+            row["note"] = (row["note"] + "; " if row.get("note") else "") + (
+                f"lowers the NRMSE but worsens the manoeuvre metrics (mean relative error {100 * e0:.1f} % -> "
+                f"{100 * e1:.1f} % over {n}; worse: {', '.join(worse[:4])}{', ...' if len(worse) > 4 else ''})")
 
 
 def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: bool = False) -> dict:
@@ -582,13 +730,14 @@ def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: 
     mf = mb if final is base else manoeuvre_predictions(doctor, final, pf)  # no effect added: the same replays
     for name, df in meas.items():
         mm += maneuver_metrics(name, df, mb.get(name), mf.get(name), doctor.problem.L)
+    candidate_metrics(doctor, rep, meas, mb)
     for name, data in figs.items():
         (out / "figures" / name).write_bytes(data)
     html_report = {**_jsonable(rep), "title": f"Model doctor: {model} on {vessel}", "created_by":
                    "python -m study.diagnose", "vessel": vessel, "model": model,
                    "structure": doctor.problem.structure.name, "worst_windows": windows,
                    "catalogue": catalogue_rows(doctor), "figures": listing, "maneuver_metrics": mm,
-                   "conventions": CONVENTIONS, "definitions": DEFINITIONS}
+                   "conventions": CONVENTIONS, "definitions": DEFINITIONS, "provenance": provenance(doctor)}
     (out / "report.json").write_text(json.dumps(html_report, indent=1, allow_nan=True, default=float),
                                      encoding="utf-8")
     (out / "report.html").write_text(render_html(html_report, figs), encoding="utf-8")
@@ -613,6 +762,66 @@ DEFINITIONS = {
     "diverged": "a replay that overflows or leaves the envelope (speed over 5 U0, yaw rate over 20 U0/L)",
     "track error": "RMS distance between replayed and measured positions [m]; its NRMSE is over the track's extent",
 }
+
+
+def record_sha256(record) -> tuple:
+    """(sha256 hex digest, of what): of the record's file as read when it has one, else of its data as CSV."""
+    import hashlib
+    from pathlib import Path
+
+    path = getattr(record, "path", None)
+    if path and Path(path).is_file():
+        h = hashlib.sha256()
+        with open(path, "rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                h.update(block)
+        return h.hexdigest(), "file"
+    df = record.data if hasattr(record, "data") else record
+    return hashlib.sha256(df.to_csv(index=False).encode()).hexdigest(), "data (CSV, no file)"
+
+
+def git_revision() -> dict:
+    """The package's git revision and whether its tracked files differ from it; None when it is not a checkout."""
+    import subprocess
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    try:
+        rev = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True,
+                             timeout=10)
+        if rev.returncode != 0:
+            return {"revision": None, "modified": None}
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=30)
+        return {"revision": rev.stdout.strip(), "modified": bool(dirty.stdout.strip())}
+    except (OSError, subprocess.SubprocessError):
+        return {"revision": None, "modified": None}
+
+
+def provenance(doctor: "Doctor", command: str | None = None) -> dict:
+    """What made the report: package and version, git revision, command line, date (UTC), and each record's
+    sha256 (its file's bytes when the report is written; a record without a file: its data as CSV)."""
+    import shlex
+    import sys
+    from datetime import datetime, timezone
+    from importlib import metadata
+
+    try:
+        version = metadata.version("study")
+    except metadata.PackageNotFoundError:
+        version = None
+    if command is None:
+        argv = list(getattr(sys, "orig_argv", None) or sys.argv)
+        command = shlex.join(argv)
+    records = []
+    for role, recs, names in (("train", doctor.train, doctor.train_names),
+                              ("validate", doctor.validate, doctor.val_names if doctor.validate else [])):
+        for r, name in zip(recs, names):
+            digest, of = record_sha256(r)
+            records.append({"role": role, "name": name, "path": getattr(r, "path", None), "sha256": digest,
+                            "sha256_of": of})
+    return {"package": "study", "version": version, **git_revision(), "command": command,
+            "date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "records": records}
 
 
 def catalogue_rows(doctor: "Doctor") -> list:

@@ -12,7 +12,9 @@ is its own warning headline, and any other diverged replay gets a warning box un
 conventions, the error ladder, the ranked candidate effects (``<table id="ranking">``, one ``<tr
 class="candidate">`` each), the per-record errors, the manoeuvres in the ship's terms, the figures grouped by
 section, the worst windows, the catalogue of effects, the notes, what was trained and validated on (with the
-parameters) and the definitions.
+parameters), the definitions and the provenance (package version, git revision, command line, date, each
+record's sha256). A table of contents under the title links to every section (and the verdict): it is built
+from the sections rendered, so each of its links has its anchor on the page.
 
 Rules the page keeps:
 
@@ -567,9 +569,14 @@ def _ranking(r: dict) -> str:
         on = [x for x in div_recs if x != "?"]
         if div and on:
             val += f'<br><span class="detail">on {_names(on)}</span>'
+        mt = _dict(c.get("metrics"))
+        e0, e1 = _finite(mt.get("baseline_error")), _finite(mt.get("error"))
+        mcell = (f'{fmt_pct(e1)}<br><span class="detail">baseline {fmt_pct(e0)}</span>'
+                 if e0 is not None and e1 is not None else NA)
         rows.append(f'<tr class="{cls}"><td class="num">{i}</td><td class="effect">{_e(c.get("effect"))}</td>'
                     f'<td class="num">{val}</td>'
                     f'<td class="num">{_pct(c.get("improvement"), div)}</td>'
+                    f'<td class="num metrics">{mcell}</td>'
                     f'<td>{mark}</td><td class="num">{_fmt_p(c.get("p_value"))}</td>'
                     f'<td class="params">{_params(c.get("parameters"), units, notes)}</td>'
                     f'<td>{_e(c.get("note"))}</td></tr>')
@@ -595,14 +602,19 @@ def _ranking(r: dict) -> str:
         return _section("Candidate effects", base_line + '<p class="muted">No candidate was tried.</p>' + na_html,
                         "candidates")
     table = ('<table id="ranking" class="ranking">\n<thead><tr><th class="num">#</th><th>Effect</th>'
-             '<th class="num">Validation error [-]</th><th class="num">Improvement</th><th>Significant</th>'
+             '<th class="num">Validation error [-]</th><th class="num">Improvement</th>'
+             '<th class="num">Manoeuvre metrics error</th><th>Significant</th>'
              '<th class="num">p&#8209;value</th><th>Identified parameters [unit]</th><th>Note</th></tr></thead>\n'
              '<tbody>\n' + "\n".join(rows) + "\n</tbody></table>")
     legend = ('<p class="legend">Candidates ranked by out-of-sample improvement: each effect is added alone to '
               'the baseline, identified on the training records and judged on the validation records. '
               '<span class="sig">&#10003; significant</span> rows are highlighted.</p>')
     extra = [("p-value", "of the paired t-test of the per-record validation errors against the baseline's "
-                         "(n/a when there are too few validation records to run it)")]
+                         "(n/a when there are too few validation records to run it)"),
+             ("manoeuvre metrics error", "the mean over the validation turning circles' and zigzags' metrics "
+                                         "(tactical diameter, advance, transfer, overshoots...) of |predicted - "
+                                         "measured| / |measured|, with the candidate (and, below, the baseline); "
+                                         "n/a without such records")]
     foot = _defs(r, ["validation error", "improvement"] + (["diverged"] if any_div else []), extra)
     return _section("Candidate effects", base_line + legend + table + _unit_notes(notes) + foot + na_html,
                     "candidates")
@@ -986,6 +998,50 @@ def _data(r: dict) -> str:
     return _section("Data and model", '<table class="data">\n' + "\n".join(rows) + "\n</table>", "data")
 
 
+def _provenance(r: dict) -> str:
+    p = _dict(r.get("provenance"))
+    if not p:
+        return ""
+    rev = _str(p.get("revision"))
+    if rev and p.get("modified") is True:
+        rev += " (with local changes to tracked files)"
+    rows = []
+    for key, label, val in (("package", "Package", f"{_str(p.get('package'))} {_str(p.get('version'))}".strip()),
+                            ("revision", "Git revision", rev or "not a git checkout"),
+                            ("command", "Command line", _str(p.get("command"))),
+                            ("date", "Date (UTC)", _str(p.get("date")))):
+        if val:
+            cls = ' class="param"' if key in ("revision", "command") else ""
+            rows.append(f"<tr><th>{label}</th><td{cls}>{_e(val)}</td></tr>")
+    recs = [x for x in _list(p.get("records")) if isinstance(x, Mapping)]
+    if recs:
+        lis = "".join(f'<tr><td>{_e(x.get("role"))}</td><td>{_e(x.get("name"))}</td>'
+                      f'<td class="param sha">{_e(x.get("sha256"))}</td><td>{_e(x.get("sha256_of"))}</td></tr>'
+                      for x in recs)
+        rows.append('<tr><th>Records (sha256)</th><td><table class="params-table records-sha">'
+                    "<thead><tr><th>Role</th><th>Record</th><th>sha256</th><th>Of</th></tr></thead>"
+                    f"<tbody>{lis}</tbody></table></td></tr>")
+    if not rows:
+        return ""
+    return _section("Provenance", '<table class="data">\n' + "\n".join(rows) + "\n</table>", "provenance")
+
+
+_SECTION_HEAD = re.compile(r'<section id="([^"]+)"[^>]*>\s*<h2>(.*?)</h2>', re.S)
+
+
+def _toc(parts: list) -> str:
+    """The table of contents: the verdict and every rendered section, in page order, each linked to its id."""
+    items = []
+    for p in parts:
+        if 'id="verdict"' in p:
+            items.append(("verdict", "Verdict"))
+        items += _SECTION_HEAD.findall(p)
+    if not items:
+        return ""
+    lis = "".join(f'<li><a href="#{sid}">{title}</a></li>' for sid, title in items)  # already escaped
+    return f'<nav id="contents" class="toc" aria-label="Contents"><h2>Contents</h2><ol>{lis}</ol></nav>'
+
+
 def _definitions(r: dict) -> str:
     d = {str(k): v for k, v in _dict(r.get("definitions")).items() if isinstance(v, str) and v.strip()}
     if not d:
@@ -1079,6 +1135,12 @@ figcaption { font-size: .9rem; color: #333; margin-top: .35rem; }
 .missing-figure { border: 1px dashed #999; padding: 1rem; color: #666; text-align: center; }
 .section-error { color: #8a1c1c; font-size: .9rem; }
 ol.worst li { margin: .15rem 0; }
+nav.toc { font-size: .9rem; background: #f6f7f9; border: 1px solid #d9dde3; padding: .3rem .9rem .5rem;
+          margin: .6rem 0 1rem; }
+nav.toc h2 { font-size: 1rem; margin: .3rem 0; border: none; }
+nav.toc ol { margin: 0; padding-left: 1.4rem; columns: 2; }
+td.sha { font-size: .75rem; overflow-wrap: anywhere; white-space: normal; }
+@media print { nav.toc { display: none; } }
 footer { margin-top: 2rem; padding-top: .5rem; border-top: 1px solid #ccc; font-size: .85rem; color: #555; }
 @media (max-width: 40rem) { html { font-size: 14px; } table { display: block; overflow-x: auto; } }
 @media print {
@@ -1133,8 +1195,10 @@ def render_html(report: Mapping | None, figures: Mapping[str, bytes] | None = No
         _safe(_notes, r),
         _safe(_data, r),
         _safe(_definitions, r),
+        _safe(_provenance, r),
     ]
-    body = "\n".join(p for p in parts if p)
+    toc = _toc(parts)
+    body = "\n".join(p for p in parts[:2] + [toc] + parts[2:] if p)
     footer = ""
     if r.get("created_by") not in (None, ""):
         footer = f'<footer>Created by {_e(r.get("created_by"))}.</footer>'

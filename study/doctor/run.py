@@ -89,6 +89,19 @@ def log_runs(conf: dict, doctor, rep: dict, train, validate) -> list:
     return ids
 
 
+def _check_place(conf: dict) -> None:
+    """The vessel config's ``facility`` (one of ``study.facility.FACILITIES``) and ``keep_setup_effects`` (a
+    boolean), refused in one line before any work."""
+    from ..cli import ConfigError
+    from ..facility import check
+
+    vessel = conf.get("vessel") or {}
+    check(vessel.get("facility"), f"conf/vessel/{vessel.get('name')}.yaml")
+    keep = conf.get("keep_setup_effects", False)
+    if not isinstance(keep, bool):
+        raise ConfigError(f"keep_setup_effects={keep!r}: expected true or false")
+
+
 @contextlib.contextmanager
 def claimed(out: Path, overwrite: bool):
     """Hold ``out`` for one doctor while it works: a second one writing into the same folder is refused at once
@@ -122,6 +135,7 @@ def run(conf: dict) -> dict:
     from .diagnose import Doctor, Options, write_report
 
     out = check_diagnose(conf)  # before any work: records and out given, no report there, thresholds in range
+    _check_place(conf)
     read = {"states": conf.get("states") or "measured", "state_options": conf.get("state_options") or None}
     train = load_records(conf["train"], **read)
     validate = load_records(conf["validate"], **read) if conf.get("validate") else []
@@ -137,7 +151,8 @@ def run(conf: dict) -> dict:
                   tie=float(conf["tie"]), max_steps=int(conf["max_steps"]),
                   candidates=tuple(cands) if cands is not None else None, structure=conf.get("structure"),
                   effect_path=tuple([path] if isinstance(path, str) else path), checks=str(conf.get("checks", "error")),
-                  anchor=float(conf.get("anchor") or 0.0))
+                  anchor=float(conf.get("anchor") or 0.0),
+                  keep_setup_effects=bool(conf.get("keep_setup_effects", False)))
     with claimed(out, bool(conf.get("overwrite"))):
         doctor = Doctor(vessel_cfg, conf["model"], train, validate, opt)
         doctor.run()

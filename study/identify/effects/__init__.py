@@ -83,6 +83,15 @@ def make_effect(cfg, extra=()) -> Effect:
         eff = cls(cfg["name"], cfg.get("params"), **dict(cfg.get("options") or {}))
     except TypeError as e:
         raise ValueError(f"{where}: bad options for {target}: {e}") from e
+    if "needs" in cfg:
+        needs = cfg["needs"]
+        if not isinstance(needs, (list, tuple)) or any(n not in ("wind", "current") for n in needs):
+            raise ValueError(f"{where}: needs: {needs}: expected a list of wind, current")
+        eff.needs = tuple(needs)
+    if "setup_effect" in cfg:
+        if not isinstance(cfg["setup_effect"], bool):
+            raise ValueError(f"{where}: setup_effect: {cfg['setup_effect']}: expected true or false")
+        eff.setup_effect = cfg["setup_effect"]
     eff.config = cfg
     return eff
 

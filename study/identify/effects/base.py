@@ -80,7 +80,12 @@ class RecordInfo:
 class Effect:
     """Base class: a candidate effect with nothing to estimate. Subclasses override the hooks they need.
 
-    Class attributes (shown in the report's catalogue): ``physics``, ``enters``, ``source``.
+    Class attributes (shown in the report's catalogue): ``physics``, ``enters``, ``source``; and where the effect
+    can be (``study.facility``): ``needs``, what must exist where the records were measured (``"wind"``,
+    ``"current"``: no wind candidate indoors, no current in still water), and ``setup_effect``, True when the
+    effect belongs to the test set-up rather than to the ship (a rudder zero offset, a yaw bias): it is then left
+    out of predictions for another facility or scale unless the user keeps it. An effect's YAML may set both
+    (``needs: [wind]``, ``setup_effect: true``); the YAML's value wins.
     ``params`` (instance): the nonlinear parameters, from the YAML (or the class's ``default_params``).
     """
 
@@ -88,6 +93,8 @@ class Effect:
     enters: str = ""
     source: str = ""
     default_params: tuple = ()
+    needs: tuple = ()
+    setup_effect: bool = False
 
     def __init__(self, name: str, params=None, **options):
         self.name = name

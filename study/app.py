@@ -160,9 +160,12 @@ def _record_status(path: Path) -> str | None:
             m = _STATUS.search(fh.read(256))
         if m:
             return m.group(1).decode()
-        return json.loads(path.read_text(encoding="utf-8")).get("status", "?")
-    except (OSError, ValueError):
+        status = json.loads(path.read_text(encoding="utf-8")).get("status", "?")
+    except OSError:  # gone meanwhile (a record replaced by its rerun): counted at the next job
         return None
+    except (ValueError, AttributeError):  # not JSON, not an object
+        return "malformed"
+    return status if isinstance(status, str) else "malformed"  # a status of another type: a malformed record
 
 
 #: the number of jobs of the running sweep, set by the sweeper before it launches them (an environment variable:

@@ -152,6 +152,9 @@ class Doctor:
         self.train_names = _names(self.train)
         self.val_names = _names(self.validate) if self.validate else self.train_names
         self.check_messages = []
+        from ..vessel_checks import check_envelope
+
+        check_envelope(vessel_cfg, self.train + self.validate)  # no measurement, whatever checks= says
         if self.opt.checks != "off":
             from ..vessel_checks import check_records
 

@@ -116,11 +116,12 @@ def claimed(out: Path, overwrite: bool):
         partial = out / PARTIAL_FIGURES  # a doctor stopped while it wrote its figures (none holds the lock now)
         if partial.exists():
             shutil.rmtree(partial, ignore_errors=True)
-        refused = False
         yield out
+        refused = False
     finally:
         lock.release()
-        if refused and made:  # a refusal leaves nothing behind: the folders it made, with the lock file
+        if refused and made:  # a refusal or a failure leaves nothing behind in a folder it made
+            shutil.rmtree(out / PARTIAL_FIGURES, ignore_errors=True)
             (out / ".report.lock").unlink(missing_ok=True)
             for p in made:
                 try:

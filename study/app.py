@@ -49,6 +49,42 @@ def _results_dir(cfg: DictConfig) -> Path:
     return Path(str(cfg.results_dir)).resolve()
 
 
+def precheck(overrides: list, multirun: bool) -> None:
+    """Every check of ``python -m study``, on the configuration composed from the command line, before Hydra
+    makes its output folder (``outputs/...``, a sweep's ``multirun/...``) or anything else: the classes the
+    configuration names, in Hydra's own node too (callbacks, launcher, sweeper: the trusted-code boundary), the
+    settings (``study.settings.check_run``: values, enumerated settings, settings that must fit together), the
+    results folder writable, and a run's records read and checked against the vessel. A sweep's jobs are
+    checked by the sweeper, before it writes anything."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    from .cli import ConfigError
+    from .config import check_target, check_targets, compose
+    from .store import ResultsFolderError, ResultStore
+    from .settings import check_run
+
+    parsed = OverridesParser.create().parse_overrides(overrides)
+    sweeps = [o for o in parsed if o.is_sweep_override()]
+    for o in sweeps:
+        if o.get_key_element().split("@")[0].endswith("_target_"):
+            for v in o.sweep_string_iterator():
+                check_target(v, o.get_key_element())
+    conf = compose("config", [o.input_line for o in parsed if not o.is_sweep_override()] if multirun
+                   else overrides, hydra=True)
+    check_targets(conf)
+    if multirun or str(conf["hydra"].get("mode")) in ("MULTIRUN", "RunMode.MULTIRUN"):
+        return
+    task = {k: v for k, v in conf.items() if k != "hydra"}
+    check_run(task)
+    try:
+        ResultStore(Path(str(task["results_dir"])).resolve()).check_writable()
+    except ResultsFolderError as e:
+        raise ConfigError(f"results_dir={task['results_dir']}: {e}") from None
+    from .pipeline import study_config
+
+    study_config(task)  # a run on the user's records: read and checked against the vessel
+
+
 class CollectResults(Callback):
     """Refuse a results folder that cannot be written before the first job; bring the results table up to date
     at the end of a run or of a whole sweep (a failure to do so exits with status 1, the records intact)."""
@@ -253,4 +289,4 @@ def sweep_finished(returns: list) -> None:
 
 
 if __name__ == "__main__":
-    run_hydra(main, "study")
+    run_hydra(main, "study", precheck)

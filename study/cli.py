@@ -41,8 +41,9 @@ class OutputExistsError(UsageError, FileExistsError):
     """An output would replace a file or report already there (pass the command's overwrite option)."""
 
 
-#: the exit status a task asked for (set by :func:`reported` and :func:`fail`; read by :func:`run_hydra`)
-_status = {"code": EXIT_OK}
+#: the exit status a task asked for (set by :func:`reported` and :func:`fail`; read by :func:`run_hydra`), and the
+#: output folder Hydra made for a task that was then refused (removed by :func:`run_hydra`)
+_status = {"code": EXIT_OK, "refused_dir": None}
 
 
 def fail(code: int) -> None:
@@ -118,7 +119,51 @@ def reported(prog: str):
     except (KeyboardInterrupt, SystemExit):
         raise
     except Exception as exc:  # noqa: BLE001 - every error is reported, none is lost
-        fail(report(exc, prog))
+        code = report(exc, prog)
+        fail(code)
+        if code == EXIT_USAGE:
+            _status["refused_dir"] = _hydra_output_dir()
+
+
+def _hydra_output_dir() -> str | None:
+    """The output folder Hydra made for the running single (not swept) task, if any."""
+    try:
+        from hydra.core.hydra_config import HydraConfig
+
+        hc = HydraConfig.get()
+        if str(hc.mode) != "RunMode.RUN" or hc.output_subdir is None:
+            return None
+        return str(hc.runtime.output_dir)
+    except Exception:  # noqa: BLE001 - not under Hydra
+        return None
+
+
+def _remove_refused_output(path: str | None, started: float) -> None:
+    """A refusal writes nothing: the output folder Hydra made for a task that was then refused (its ``.hydra/``
+    and job log) is removed, with the parents it made (empty folders made since the command started). A folder
+    holding anything else, or the launch folder itself, is left alone."""
+    import shutil
+    from pathlib import Path
+
+    if not path:
+        return
+    run_dir, cwd = Path(path).resolve(), Path.cwd().resolve()
+    if run_dir == cwd or cwd.is_relative_to(run_dir) or not run_dir.is_dir():
+        return
+    if any(not (e.name == ".hydra" or e.name.endswith(".log")) for e in run_dir.iterdir()):
+        return
+    if run_dir.stat().st_mtime < started - 1:
+        return
+    shutil.rmtree(run_dir, ignore_errors=True)
+    parent = run_dir.parent
+    while parent != cwd and parent != parent.parent and not cwd.is_relative_to(parent):
+        try:
+            if parent.stat().st_ctime < started - 1 or any(parent.iterdir()):
+                break
+            parent.rmdir()
+        except OSError:
+            break
+        parent = parent.parent
 
 
 def _take_verbose(argv: list) -> bool:
@@ -140,19 +185,73 @@ def _exit(code: int):
 _OURS = "STUDY_SET_HYDRA_FULL_ERROR"
 
 
-def run_hydra(hydra_main, prog: str):
+#: Hydra's command-line flags that take a value (the rest of the command line is overrides)
+_HYDRA_VALUE_FLAGS = ("--config-path", "-cp", "--config-name", "-cn", "--config-dir", "-cd", "--experimental-rerun",
+                      "--package", "-p", "--info", "-i", "--cfg", "-c")
+
+
+def overrides_of(argv: list) -> tuple[list, bool] | None:
+    """``(overrides, multirun)`` of a Hydra command line, or None when it asks for something other than a run
+    (``--help``, ``--cfg``, ``--info``, a shell completion, another config): those are Hydra's to answer."""
+    over, multirun = [], False
+    for a in argv:
+        if a in ("-m", "--multirun"):
+            multirun = True
+        elif a.startswith("-"):
+            return None
+        else:
+            over.append(a)
+    return over, multirun
+
+
+def check_overrides(overrides: list) -> None:
+    """Each override parses (``key=value``); one that does not is refused naming it, with what was expected
+    (Hydra's own message is a parser exception's name: an unquoted path with spaces, a stray word)."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    parser = OverridesParser.create()
+    for i, o in enumerate(overrides):
+        try:
+            parser.parse_override(o)
+        except Exception:  # noqa: BLE001 - Hydra raises its own or the lexer's exceptions
+            hint = ""
+            if "=" not in o and i > 0:
+                hint = (f" (with {overrides[i - 1]!r} before it: a value with spaces must be quoted, "
+                        f"'{overrides[i - 1]} {o}')")
+            elif "=" not in o:
+                hint = " (a setting is key=value)"
+            raise ConfigError(f"command-line argument {o!r}: expected key=value, a Hydra override{hint}") from None
+
+
+def run_hydra(hydra_main, prog: str, precheck=None):
     """Run a ``@hydra.main`` function as a command with one-line errors; exits the process.
 
     ``--verbose`` is taken off the command line (and exported as ``STUDY_VERBOSE=1``, so jobs in other processes
     see it too). ``HYDRA_FULL_ERROR=1`` makes Hydra re-raise what it would print as a traceback (a configuration
     that does not compose, an error in a sweep's job); it is reported here in one line.
+
+    ``precheck(overrides, multirun)``, the command's checks of its composed configuration, runs before Hydra
+    makes any folder or file: a refusal there writes nothing. A task refused later (status 2) has the output
+    folder Hydra made for it removed again.
     """
+    import time
+
     users = os.environ.get("HYDRA_FULL_ERROR") == "1" and os.environ.get(_OURS) != "1"  # not one we set
     if _take_verbose(sys.argv) or users:
         os.environ[VERBOSE_ENV] = "1"
     os.environ["HYDRA_FULL_ERROR"] = os.environ[_OURS] = "1"
-    _status["code"] = EXIT_OK
+    _status["code"], _status["refused_dir"] = EXIT_OK, None
+    started = time.time()
+    parsed = overrides_of(sys.argv[1:])
+    if parsed is not None:
+        def first():
+            check_overrides(parsed[0])
+            if precheck is not None:
+                precheck(*parsed)
+        _guarded(first, prog)  # a refusal exits here, before Hydra has made anything
     _guarded(hydra_main, prog)
+    if _status["code"] == EXIT_USAGE:
+        _remove_refused_output(_status["refused_dir"], started)
     _exit(_status["code"])
 
 
@@ -179,11 +278,24 @@ def parser(prog: str, description: str, **kw) -> argparse.ArgumentParser:
     return ap
 
 
+def _one_line_usage(prog: str):
+    """argparse's ``error`` as the other refusals: one line, ``<command>: error: <what>``, exit status 2 (argparse
+    prints a usage block of several lines first)."""
+    def error(self, msg):
+        sub = self.prog.split()[3:] if self.prog.startswith("python -m ") else []  # a subcommand's parser
+        where = " ".join([prog, *sub])
+        print(f"{prog}: error: {msg}; expected the arguments `python -m {where} --help` lists",
+              file=sys.stderr, flush=True)
+        sys.exit(EXIT_USAGE)
+    return error
+
+
 def run(main, prog: str, argv: list | None = None):
     """Run an argparse command ``main(argv) -> exit status`` with one-line errors; exits the process."""
     args = list(sys.argv[1:] if argv is None else argv)
     if _take_verbose(args):
         os.environ[VERBOSE_ENV] = "1"
+    argparse.ArgumentParser.error = _one_line_usage(prog)  # every parser and sub-parser of the command
     code = _guarded(lambda: main(args), prog)
     _exit(int(code or 0))
 

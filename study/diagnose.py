@@ -45,5 +45,18 @@ def _main(conf: dict) -> None:
     print(f"report: {out / 'report.html'} (and report.json, figures/)")
 
 
+def precheck(overrides: list, multirun: bool) -> None:
+    """The doctor's settings checks on its composed configuration, before Hydra starts: the settings, the
+    classes the configuration and the effect folders name (before anything is imported), ``out=`` and the
+    results folder writable. The records are read and checked against the vessel by the run, before it makes
+    the report folder."""
+    from .config import check_targets, compose
+    from .settings import check_diagnose
+
+    conf = compose("diagnose", overrides, hydra=True)
+    check_targets(conf)
+    check_diagnose({k: v for k, v in conf.items() if k != "hydra"})
+
+
 if __name__ == "__main__":
-    run_hydra(main, "study.diagnose")
+    run_hydra(main, "study.diagnose", precheck)

@@ -18,6 +18,7 @@ chunk is done, so a kill loses at most one chunk (as many replicates as about
 from __future__ import annotations
 
 import json
+import os
 import time
 import traceback
 from dataclasses import dataclass
@@ -32,8 +33,17 @@ from .store.files import now_iso
 #: How resume decides that a finished run can be reused: ``code`` (its code fingerprint equals the current
 #: code's) or ``config`` (any finished record of the configuration, whatever code made it).
 RESUME_MODES = ("code", "config")
-#: A chunk of replicates takes about this long [s] to compute (at least one replicate): what a kill can lose.
+#: A chunk of replicates takes about this long [s] to compute (at least one replicate): what a kill can lose
+#: (``STUDY_CHUNK_SECONDS`` sets it; 0: every replicate written as soon as it is computed, no batched replay).
 CHUNK_SECONDS = 2.0
+
+
+def _chunk_seconds() -> float:
+    v = os.environ.get("STUDY_CHUNK_SECONDS", "").strip()
+    try:
+        return max(0.0, float(v)) if v else CHUNK_SECONDS
+    except ValueError:
+        return CHUNK_SECONDS
 
 
 def dataset_seed(seed: int, replicate: int) -> int:
@@ -215,7 +225,7 @@ def run_replicated(store: ResultStore, config: dict, job: ReplicatedJob, replica
                 wall = own + shared_time / max(1, len(pending))
                 record, artefacts = _record(rep, config, seed, started, res, wall, code, replicated)
                 out[rep.index] = _write(store, record, artefacts, before[rep.index])
-            chunk = max(1, int(CHUNK_SECONDS / max(took / len(todo), 1e-3)))
+            chunk = max(1, int(_chunk_seconds() / max(took / len(todo), 1e-3)))
         finally:
             for claim in claims:
                 claim.release()

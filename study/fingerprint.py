@@ -51,7 +51,7 @@ PACKAGE = "study"
 #: only).
 OPTIONAL_PACKAGES = ("study.doctor", "study.identify.with_effects", "study.identify.effects", "study.records_run",
                      "study.diagnose", "study.figures", "study.reality_check", "study.results", "study.app",
-                     "study.simulate", "study.fingerprint", "study.store", "study.executor")
+                     "study.simulate", "study.fingerprint", "study.store", "study.executor", "study.api")
 
 COMPONENTS = ("simulator", "model", "structure", "estimator", "pipeline")
 #: Hex digits kept of each file's hash in a record (48 bits: a collision between two versions of one file is

@@ -184,15 +184,19 @@ def metric_key(name: str) -> str:
 
 def _vessel_check(conf: dict, sets: list) -> tuple[str, list]:
     """(mode, problems) of the doctor's record checks against the vessel; raises under ``checks=error``."""
-    from .vessel_checks import check_records
+    from .vessel_checks import RecordCheckError, check_envelope, check_records
 
     mode = str(conf.get("checks") or "error")
     if mode not in CHECK_MODES:
         raise RecordsInputError(f"checks={mode}: expected one of {', '.join(CHECK_MODES)}")
-    if mode == "off":
-        return mode, []
     recs = [r for s in sets for r in s.records]
     paths = [str(p) for s in sets for p in s.paths]
+    try:  # a value outside its channel's physical envelope is refused whatever checks= says
+        check_envelope(conf["vessel"], recs, names=paths)
+    except RecordCheckError as e:
+        raise RecordsInputError(str(e)) from None
+    if mode == "off":
+        return mode, []
     problems = [_one_line(p) for p in check_records(conf["vessel"], recs, names=paths, strict=False)]
     if problems and mode == "error":
         others = list(dict.fromkeys(Path(p.split(": ")[0]).name for p in problems[1:]))

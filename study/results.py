@@ -41,6 +41,10 @@ def main(argv: list[str] | None = None) -> int:
             p.add_argument("--strict", action="store_true", help="exit 1 when a record was skipped")
     args = ap.parse_args(argv)
     store = ResultStore(args.root)
+    if not store.root.is_dir():  # nothing to show or rebuild: refused, and no folder is made
+        print(f"study.results: error: --root {args.root or store.root}: no such folder {store.root.resolve()}; "
+              "expected a results folder (one a study wrote)", file=sys.stderr)
+        return 2
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # the same problems are printed from the report below
         try:

@@ -84,6 +84,11 @@ class Record:
     meta: dict = field(default_factory=dict)
     path: str | None = None
 
+    def __post_init__(self):
+        # where the data came from travels with them (pandas ``attrs``), so a later step's message names the file
+        if isinstance(self.data, pd.DataFrame) and (self.path or self.meta.get("name")):
+            self.data.attrs.setdefault("source", str(self.path or self.meta.get("name")))
+
     @property
     def name(self) -> str:
         return str(self.meta.get("name") or (Path(self.path).stem if self.path else "record"))
@@ -157,7 +162,9 @@ def validate(df: pd.DataFrame, path=None, min_samples: int = 20, hint: str = "",
         return
     from .plausibility import check
 
-    for f in check(df):
+    with np.errstate(all="ignore"):  # a wild value (1e300) overflows the ratios; the vessel's envelope names it
+        findings = check(df)
+    for f in findings:
         if f.level == "error" and plausibility == "error":
             raise SchemaError(f"{where}: {f.message}")
         warnings.warn(f"{where}: {f.message}", RecordWarning, stacklevel=2)

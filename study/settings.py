@@ -10,6 +10,12 @@ Each check here raises :class:`study.cli.ConfigError` (a ``ValueError``) with ``
 - :func:`check_simulate`: ``python -m study.simulate`` (also that ``out=`` is given, is a record file and is not
   there already).
 - :func:`check_diagnose`: ``python -m study.diagnose`` (``train=`` and ``out=`` given, the doctor's thresholds).
+
+Every enumerated setting of every command is in one table, :data:`ENUMS`, checked by :func:`check_enums` (a value
+outside it used to act like another one: the doctor's ``checks=eror`` as ``warn``). Settings that make a run
+impossible together (an integration step longer than the ship's time scale, a sampling interval shorter than the
+step) are checked against each other (:func:`check_together`), and the folders a command writes are proven
+writable (:func:`writable`) before any work.
 """
 from __future__ import annotations
 
@@ -71,6 +77,102 @@ def required(conf: dict, key: str, what: str) -> None:
         raise ConfigError(f"{key}= is required: {what}")
 
 
+# --------------------------------------------------------------------------------------- enumerated settings
+
+BOOLEAN = (True, False)
+CHECK_MODES = ("error", "warn", "off")          # study.records_run.CHECK_MODES, the doctor's checks
+STATES = ("measured", "auto", "ekf")            # study.schema.STATES
+RESUME_MODES = ("code", "config")               # study.executor.RESUME_MODES
+RUDDER_LOGS = ("both", "actual", "command")
+NOISE_KINDS = ("relative", "absolute")          # study.measure.NOISE_KINDS
+SHALLOW_FORMULAS = ("kijima_1990", "ankudinov")  # study.sim.effects.LINEAR_FORMULAS
+
+#: every enumerated setting of each command: dotted key -> (allowed values, None allowed: it means the default)
+ENUMS = {
+    "study": {"resume": (RESUME_MODES, True), "checks": (CHECK_MODES, True), "states": (STATES, True),
+              "force": (BOOLEAN, False), "progress": (BOOLEAN, False), "noise.kind": (NOISE_KINDS, True),
+              "depth.formula": (SHALLOW_FORMULAS, True)},
+    "study.simulate": {"rudder_log": (RUDDER_LOGS, True), "overwrite": (BOOLEAN, False),
+                       "noise.kind": (NOISE_KINDS, True), "depth.formula": (SHALLOW_FORMULAS, True)},
+    "study.diagnose": {"checks": (CHECK_MODES, True), "states": (STATES, True), "rudder": (("delta", "delta_cmd"), True),
+                       "overwrite": (BOOLEAN, False), "log_runs": (BOOLEAN, False),
+                       "state_options.use_velocities": (BOOLEAN, True), "depth.formula": (SHALLOW_FORMULAS, True)},
+}
+
+
+def _get(conf: dict, key: str, absent=None):
+    node = conf
+    for part in key.split("."):
+        if not isinstance(node, dict) or part not in node:
+            return absent
+        node = node[part]
+    return node
+
+
+def check_enums(conf: dict, command: str) -> None:
+    """Each enumerated setting of ``command`` (:data:`ENUMS`) holds one of its values (a boolean a boolean:
+    ``force=maybe`` is not true)."""
+    for key, (allowed, nullable) in ENUMS[command].items():
+        v = _get(conf, key, absent=_ABSENT)
+        if v is _ABSENT or (v is None and nullable):
+            continue
+        ok = (isinstance(v, bool) and v in allowed) if allowed is BOOLEAN else \
+            (isinstance(v, str) and v in allowed)
+        if not ok:
+            what = "true or false" if allowed is BOOLEAN else "one of " + ", ".join(allowed)
+            raise ConfigError(f"{key}={v!r}: expected {what}")
+
+
+_ABSENT = object()
+
+
+def check_state_options(conf: dict) -> None:
+    """The doctor's state estimator options: each standard deviation ``auto`` or a finite number > 0, the
+    process noise ``ml`` or ``{q_uv: ..., q_r: ...}``."""
+    so = conf.get("state_options")
+    if so is None:
+        return
+    if not isinstance(so, dict):
+        raise ConfigError(f"state_options={so!r}: expected a mapping of the state estimator's options")
+    known = ("position_std", "heading_std", "u_std", "v_std", "r_std", "use_velocities", "process")
+    bad = sorted(set(so) - set(known))
+    if bad:
+        raise ConfigError(f"state_options.{bad[0]}: no such option; expected some of {list(known)}")
+    for k in known[:5]:
+        if so.get(k) not in (None, "auto"):
+            value(f"state_options.{k}", so[k], above=0)
+    proc = so.get("process")
+    if proc not in (None, "ml"):
+        if not isinstance(proc, dict) or set(proc) != {"q_uv", "q_r"}:
+            raise ConfigError(f"state_options.process={proc!r}: expected ml or {{q_uv: m^2/s^5, q_r: rad^2/s^5}}")
+        for k in proc:
+            value(f"state_options.process.{k}", proc[k], above=0)
+
+
+# --------------------------------------------------------------------------------------- writable folders
+
+def writable(path, setting: str, folder: bool = True) -> None:
+    """Prove that the folder ``path`` (a file's folder when not ``folder``) can be written, before any work:
+    a real file is created and removed in it or, when it is not there yet, in its nearest existing ancestor
+    (nothing is left behind). Refused naming the setting, the folder and the reason."""
+    import os
+    import tempfile
+
+    target = Path(str(path)).expanduser().absolute()
+    d = target if folder else target.parent
+    while not d.exists() and d != d.parent:
+        d = d.parent
+    try:
+        if not d.is_dir():
+            raise NotADirectoryError(20, "not a folder", str(d))
+        fd, probe = tempfile.mkstemp(prefix=".study-write-probe-", dir=d)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        raise ConfigError(f"{setting}={path}: folder {d} cannot be written ({e.strerror or e}); expected a folder "
+                          "this user can create files in") from None
+
+
 # ------------------------------------------------------------------------------------------ shared parts
 
 #: effect parameters that are speeds, times or rates: negative makes no sense (a rate limit of 0: none at all)
@@ -119,6 +221,80 @@ def check_simulation(conf: dict) -> None:
                 raise ConfigError(f"{key}={v!r}: expected a finite number")
 
 
+def _time_scale(conf: dict) -> tuple[float | None, float | None]:
+    """``(L/U0 [s], default integration step [s])`` of the configured vessel, (None, None) when it has no
+    length and speed."""
+    L, U0 = _get(conf, "vessel.particulars.Lpp"), _get(conf, "vessel.operation.U0")
+    if not (_is_number(L) and _is_number(U0) and L > 0 and U0 > 0 and math.isfinite(L / U0)):
+        return None, None
+    from types import SimpleNamespace
+
+    from .sim import default_dt
+
+    return L / U0, default_dt(SimpleNamespace(L=float(L), U0=float(U0)))
+
+
+def check_together(conf: dict) -> None:
+    """Settings that make a simulation impossible together, checked against each other before any work: an
+    integration step longer than a tenth of the ship's time scale L/U0 (a manoeuvre is not resolved; the default
+    is about 1 %), a sampling interval shorter than the step (records are decimated from the simulation), or
+    both sampling intervals given."""
+    nz = conf.get("noise") or {}
+    if isinstance(nz, dict) and nz.get("sample_dt") is not None and nz.get("sample_dt_LU") is not None:
+        raise ConfigError(f"noise.sample_dt={nz['sample_dt']} and noise.sample_dt_LU={nz['sample_dt_LU']}: expected "
+                          "one of them (the other null)")
+    T, default = _time_scale(conf)
+    if T is None:
+        return
+    name = _get(conf, "vessel.name") or "the vessel"
+    dt = _get(conf, "sim.dt")
+    if _is_number(dt) and dt > 0.1 * T:
+        raise ConfigError(f"sim.dt={dt!r}: expected at most {0.1 * T:.3g} s, a tenth of {name}'s time scale L/U0 = "
+                          f"{T:.3g} s (null for the default, {default:g} s)")
+    step = float(dt) if _is_number(dt) and dt > 0 else default
+    sdt = nz.get("sample_dt") if isinstance(nz, dict) else None
+    if _is_number(sdt) and sdt < step * (1 - 1e-9):
+        raise ConfigError(f"noise.sample_dt={sdt!r}: expected at least the integration step, {step:g} s (records "
+                          "are sampled from the simulation; null samples every step)")
+    dur = _get(conf, "sim.duration")
+    if _is_number(dur) and dur < 2 * step:
+        raise ConfigError(f"sim.duration={dur!r}: expected at least two integration steps, {2 * step:g} s")
+
+
+#: hyper-parameters that count something: an integer >= this (when not null)
+_COUNTS = {"n_splits": 2, "cv": 2}
+_COUNT_NAMES = ("n_", "max_", "min_steps", "maxiter", "popsize", "target_ess", "check_every")
+
+
+def check_hyper_parameters(name: str, cls, params: dict, where: str) -> None:
+    """An estimator's hyper-parameters, of the kind its constructor's defaults say, before any work: a count
+    (``n_splits``, ``max_iter``, ``n_*``) a positive integer (cross-validation at least 2 folds), a boolean a
+    boolean, a number where the default is a number (or text where text is allowed), finite."""
+    import inspect
+
+    defaults = {k: p.default for k, p in inspect.signature(cls.__init__).parameters.items()
+                if k != "self" and p.default is not inspect.Parameter.empty}
+    for k, v in (params or {}).items():
+        key = f"{where}.{k}"
+        d = defaults.get(k, _ABSENT)
+        if v is None:
+            continue
+        if isinstance(d, bool):
+            if not isinstance(v, bool):
+                raise ConfigError(f"{key}={v!r}: expected true or false (estimator '{name}')")
+            continue
+        count = k in _COUNTS or k.startswith(_COUNT_NAMES)
+        if count and (_is_number(d) or d is None):
+            value(key, v, minimum=_COUNTS.get(k, 1), integer=True)
+        elif _is_number(d):
+            if isinstance(v, str) or isinstance(v, bool) or (not _is_number(v) and not isinstance(v, (list, tuple))):
+                raise ConfigError(f"{key}={v!r}: expected a number (estimator '{name}', default {d!r})")
+            if _is_number(v):
+                value(key, v)
+        elif _is_number(v):
+            value(key, v)
+
+
 def _estimator_params(name: str, cfg: dict | None = None) -> list[str]:
     """The hyper-parameters the estimator ``name`` (or its config ``cfg``) accepts: its class's constructor."""
     from .config import read_config
@@ -135,6 +311,8 @@ def _estimator_params(name: str, cfg: dict | None = None) -> list[str]:
 def check_estimator(conf: dict) -> None:
     """``estimator.params`` and ``estimator_overrides``: every name must be an estimator and one of its
     hyper-parameters (a misspelt one used to be ignored, or to fail the run only when that estimator ran)."""
+    from .identify.estimators import estimator_class
+
     est = conf.get("estimator") or {}
     if est.get("_target_"):
         known = _estimator_params(est.get("name"), est)
@@ -142,6 +320,7 @@ def check_estimator(conf: dict) -> None:
         if bad:
             raise ConfigError(f"estimator.params: estimator '{est.get('name')}' has no hyper-parameter "
                               f"{', '.join(bad)}; expected some of {known}")
+        check_hyper_parameters(est.get("name"), estimator_class(est), est.get("params"), "estimator.params")
     over = conf.get("estimator_overrides") or {}
     if not isinstance(over, dict):
         raise ConfigError(f"estimator_overrides={over!r}: expected {{<estimator name>: {{param: value}}}}")
@@ -155,14 +334,26 @@ def check_estimator(conf: dict) -> None:
         if bad:
             raise ConfigError(f"estimator_overrides.{name}: estimator '{name}' has no hyper-parameter "
                               f"{', '.join(bad)}; expected some of {known}")
+        from .config import read_config
+
+        check_hyper_parameters(str(name), estimator_class(read_config("estimator", str(name))), params,
+                               f"estimator_overrides.{name}")
 
 
 # ---------------------------------------------------------------------------------------------- commands
 
 def check_run(conf: dict) -> None:
-    """A study run's configuration (``python -m study``)."""
+    """A study run's configuration (``python -m study``): every value, the enumerated settings, the number of
+    replicates, the settings that must fit together (a simulated run), the estimator's hyper-parameters and the
+    classes the configuration names (the trusted-code boundary, before anything is imported)."""
+    from .config import check_targets
+
+    check_targets({k: v for k, v in conf.items() if k != "hydra"})
+    check_enums(conf, "study")
     check_replicates(conf)
     check_simulation(conf)
+    if conf.get("train") is None:
+        check_together(conf)
     check_estimator(conf)
 
 
@@ -183,10 +374,9 @@ def check_simulate(conf: dict) -> Path:
     from .schema import SUPPORTED
 
     required(conf, "out", "the record file to write (out=<file.csv|file.parquet>)")
+    check_enums(conf, "study.simulate")
     check_simulation(conf)
-    log = conf.get("rudder_log", "both")
-    if log not in ("both", "actual", "command"):
-        raise ConfigError(f"rudder_log={log!r}: expected 'both', 'actual' or 'command'")
+    check_together(conf)
     path = Path(str(conf["out"])).expanduser()
     if path.suffix.lower() not in SUPPORTED:
         raise ConfigError(f"out={conf['out']}: unsupported file type '{path.suffix}'; expected one of "
@@ -196,6 +386,7 @@ def check_simulate(conf: dict) -> Path:
                                 "replace it)")
     if path.is_dir():
         raise ConfigError(f"out={conf['out']}: is a folder; expected a record file")
+    writable(path, "out", folder=False)
     return path
 
 
@@ -204,8 +395,12 @@ REPORT_FILES = ("report.json", "report.html", "figures")
 
 
 def existing_report(out: Path) -> list[str]:
-    """The report files already in ``out`` (empty when there are none)."""
-    return [n for n in REPORT_FILES if (out / n).exists()]
+    """The report files already in ``out`` (empty when there are none). An empty ``figures/`` is no report (a
+    doctor stopped before it wrote one left it; the figures are written to a temporary folder and moved in)."""
+    def there(n):
+        p = out / n
+        return p.is_dir() and any(p.iterdir()) if n == "figures" else p.exists()
+    return [n for n in REPORT_FILES if there(n)]
 
 
 def check_diagnose(conf: dict) -> Path:
@@ -213,6 +408,8 @@ def check_diagnose(conf: dict) -> Path:
     ``overwrite=true``), the doctor's thresholds in range. Returns the output folder."""
     required(conf, "train", "the training records (train=<file|folder|glob>)")
     required(conf, "out", "the report folder to write (out=<folder>)")
+    check_enums(conf, "study.diagnose")
+    check_state_options(conf)
     number(conf, "min_improvement", minimum=0, below=1, optional=False)
     number(conf, "alpha", above=0, below=1, optional=False)
     number(conf, "tie", minimum=0, optional=False)
@@ -226,4 +423,43 @@ def check_diagnose(conf: dict) -> Path:
     if there and not conf.get("overwrite"):
         raise OutputExistsError(f"out={conf['out']}: {out} already holds {', '.join(there)}; refusing to overwrite "
                                 "a report (overwrite=true to overwrite it, or another out=)")
+    check_candidates(conf)
+    writable(out, "out")
+    if conf.get("log_runs", True):
+        res = conf.get("results_dir")
+        writable(res if res else out / "results", "results_dir" if res else "out")
     return out
+
+
+def check_candidates(conf: dict) -> None:
+    """The doctor's effect folders exist, its candidates and the model's effects are effects of the catalogue,
+    and each names a class of the package or of an effect folder (checked before anything is imported)."""
+    from .config import check_target
+    from .identify.effects import effect_config, effect_dirs, list_effects
+
+    path = conf.get("effect_path") or ()
+    path = [path] if isinstance(path, str) else list(path)
+    for p in path:
+        if not Path(str(p)).expanduser().is_dir():
+            raise ConfigError(f"effect_path={p}: no such folder; expected folders of effect YAMLs")
+    try:
+        dirs = effect_dirs(path)
+    except ValueError as e:
+        raise ConfigError(str(e)) from None
+    known = list_effects(path)
+    cands = conf.get("candidates")
+    if cands is not None and not isinstance(cands, (list, tuple)):
+        raise ConfigError(f"candidates={cands!r}: expected a list of effect names (or null: all)")
+    given = list(_get(conf, "model.effects") or [])
+    for where, names in (("candidates", cands or []), ("model.effects", given)):
+        for n in names:
+            if isinstance(n, dict):
+                check_target(n.get("_target_"), f"{where}: _target_", plugin_dirs=dirs[1:])
+                continue
+            if n not in known:
+                raise ConfigError(f"{where}: {n!r}: no such effect; expected one of {known} (conf/effect/, "
+                                  "effect_path or STUDY_EFFECT_PATH)")
+    for n in (cands if cands is not None else known):
+        if isinstance(n, str):
+            cfg = effect_config(n, path)
+            check_target(cfg.get("_target_"), f"{cfg.get('_file', n)}: _target_", plugin_dirs=dirs[1:])

@@ -77,5 +77,17 @@ def _write(conf: dict) -> None:
     print(f"wrote {path} ({len(rec.data)} samples, {rec.data['time'].iloc[-1]:.1f} s)")
 
 
+def precheck(overrides: list, multirun: bool) -> None:
+    """Every check of ``python -m study.simulate`` on its composed configuration, before Hydra starts and
+    before anything is simulated: the settings, the classes the configuration names, ``out=`` (given, a record
+    file, not there, its folder writable)."""
+    from .config import check_targets, compose
+    from .settings import check_simulate
+
+    conf = compose("simulate", overrides, hydra=True)
+    check_targets(conf)
+    check_simulate({k: v for k, v in conf.items() if k != "hydra"})
+
+
 if __name__ == "__main__":
-    run_hydra(main, "study.simulate")
+    run_hydra(main, "study.simulate", precheck)

@@ -311,6 +311,64 @@ def _where(i: int, rec, names) -> str:
     return f"record {i}"
 
 
+# The physical envelope of a record's channels for the vessel's scale: a value outside it is no measurement
+# (one sample of u = 1e300 changed every estimate of a run that then ended "ok"). Generous on purpose: speeds up
+# to ENVELOPE_SPEED U0 and yaw rates up to ENVELOPE_SPEED U0/L (a record of the same hull at another scale, which
+# the speed check names, stays inside for scale factors up to ENVELOPE_SPEED^2), positions no farther from the
+# start than that speed carries the ship in the record's time plus ten ship lengths, a rudder angle within 90 deg,
+# a propeller speed within 100 times the vessel's.
+ENVELOPE_SPEED = 20.0
+
+
+def _envelope(df, facts: VesselFacts) -> dict:
+    """column -> (low, high, what) of the channels the record has."""
+    L, U0 = facts.L, facts.U0
+    out = {}
+    if not (L > 0 and U0 > 0 and math.isfinite(L) and math.isfinite(U0)):
+        return out
+    vmax = ENVELOPE_SPEED * U0
+    for c in ("u", "v"):
+        out[c] = (-vmax, vmax, f"|{c}| <= {ENVELOPE_SPEED:g} U0 = {vmax:.3g} m/s")
+    rmax = ENVELOPE_SPEED * U0 / L
+    out["r"] = (-rmax, rmax, f"|r| <= {ENVELOPE_SPEED:g} U0/L = {rmax:.3g} rad/s")
+    for c in ("delta", "delta_cmd"):
+        out[c] = (-math.pi / 2, math.pi / 2, f"|{c}| <= pi/2 rad (90 deg)")
+    if "time" in df.columns and len(df):
+        t = df["time"].to_numpy(float)
+        span = float(np.nanmax(t) - np.nanmin(t)) if np.isfinite(t).any() else 0.0
+        reach = vmax * span + 10 * L
+        for c in ("x0", "y0"):
+            if c in df.columns and len(df):
+                first = df[c].to_numpy(float)[0]
+                if math.isfinite(first):
+                    out[c] = (first - reach, first + reach, f"within {reach:.3g} m of its first value "
+                              f"({ENVELOPE_SPEED:g} U0 over the record's {span:.3g} s, plus 10 L)")
+    if facts.n0 > 0:
+        nmax = 100 * facts.n0
+        out["n"] = (-nmax, nmax, f"|n| <= 100 n0 = {nmax:.3g} rps")
+    return out
+
+
+def check_envelope(vessel_cfg, records: list, names: list[str] | None = None) -> None:
+    """Refuse the first value outside its channel's physical envelope for the vessel (:data:`ENVELOPE_SPEED`),
+    naming the file, the column, the row (the record's data rows from 1) and the value; raises
+    :class:`RecordCheckError`. Not switched off by ``checks=off``: such a value is no measurement."""
+    facts = vessel_facts(_plain(vessel_cfg))
+    for i, rec in enumerate(records):
+        df = rec.data if hasattr(rec, "data") else rec
+        for col, (lo, hi, what) in _envelope(df, facts).items():
+            if col not in df.columns:
+                continue
+            x = df[col].to_numpy(float)
+            bad = np.flatnonzero(~((x >= lo) & (x <= hi)) & np.isfinite(x))
+            if bad.size:
+                j = int(bad[0])
+                t = f" (time {df['time'].iloc[j]:g} s)" if "time" in df.columns else ""
+                more = f", and {bad.size - 1} more row(s)" if bad.size > 1 else ""
+                raise RecordCheckError([f"{_where(i, rec, names)}: column '{col}', row {j + 1}{t}: {x[j]:.6g}: "
+                                        f"expected {what} for vessel {facts.name}{more}"])
+
+
 def check_records(vessel_cfg: dict, records: list, names: list[str] | None = None, strict: bool = True) -> list[str]:
     """Plausibility checks of records against the vessel (rudder sign, speed against the vessel's scale,
     propeller speed against the vessel's): see the module docstring.

@@ -182,13 +182,16 @@ def test_diagnose_refuses_a_folder_holding_any_report_file(tmp_path):
     assert p.returncode == 2 and "report.html" in _one_line(p) and "refusing to overwrite" in _one_line(p)
     assert (out / "report.html").read_text() == "old"
     (out / "report.html").unlink()
-    for present in ("report.json", "figures"):
-        (out / present).mkdir()
-        conf = _compose("diagnose", [f"train={tmp_path}/x.csv", f"out={out}"])
-        with pytest.raises(cli.OutputExistsError, match=present):
-            check_diagnose(conf)
-        assert check_diagnose({**conf, "overwrite": True}) == out
-        (out / present).rmdir()
+    conf = _compose("diagnose", [f"train={tmp_path}/x.csv", f"out={out}"])
+    (out / "figures").mkdir()  # empty: what a doctor stopped before it wrote any figure leaves; no report
+    assert check_diagnose(conf) == out
+    (out / "figures" / "ladder.png").write_bytes(b"png")
+    with pytest.raises(cli.OutputExistsError, match="figures"):
+        check_diagnose(conf)
+    assert check_diagnose({**conf, "overwrite": True}) == out
+    (out / "report.json").mkdir()
+    with pytest.raises(cli.OutputExistsError, match="report.json"):
+        check_diagnose(conf)
 
 
 def test_diagnose_checks_its_thresholds_and_train():

@@ -222,8 +222,10 @@ def test_the_command_refuses_a_bad_number_of_replicates_before_any_work(tmp_path
 def test_the_command_lands_replicates_and_resumes_after_a_kill(tmp_path):
     """``python -m study replicates=N``: killed (SIGKILL) once some replicates have landed, then run again with
     a larger N: every replicate once, none computed twice after it landed."""
+    env = dict(os.environ, STUDY_CHUNK_SECONDS="0")  # every replicate written as soon as it is computed
+    env.pop("STUDY_RESULTS_DIR", None)
     proc = subprocess.Popen([sys.executable, "-m", "study", *TINY, f"hydra.run.dir={tmp_path / 'out'}",
-                             f"results_dir={tmp_path / 'results'}", "replicates=12"], cwd=tmp_path,
+                             f"results_dir={tmp_path / 'results'}", "replicates=40"], cwd=tmp_path, env=env,
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     records = tmp_path / "results" / "records"
     deadline = time.monotonic() + 300  # a hang guard, not a timing assertion
@@ -236,12 +238,12 @@ def test_the_command_lands_replicates_and_resumes_after_a_kill(tmp_path):
     finally:
         proc.wait(timeout=60)
     landed = {p.stem: p.stat().st_mtime_ns for p in records.glob("*.json")}
-    assert 3 <= len(landed) < 12
-    p = _study(tmp_path, "replicates=15")
+    assert 3 <= len(landed) < 40
+    p = _study(tmp_path, "replicates=45")
     assert p.returncode == 0, p.stderr
     assert (p.stdout + p.stderr).count("(already finished, resumed)") == len(landed)
     after = {q.stem: q.stat().st_mtime_ns for q in records.glob("*.json")}
     assert all(after[k] == v for k, v in landed.items())  # landed replicates were not computed again
     runs = pd.read_parquet(tmp_path / "results" / "runs.parquet")
-    assert len(runs) == 15 and runs["run_id"].is_unique and sorted(runs["replicate"]) == list(range(15))
-    assert (runs["status"] == "ok").all() and runs["dataset_seed"].nunique() == 15
+    assert len(runs) == 45 and runs["run_id"].is_unique and sorted(runs["replicate"]) == list(range(45))
+    assert (runs["status"] == "ok").all() and runs["dataset_seed"].nunique() == 45

@@ -109,6 +109,41 @@ def make_chunks(jobs: Sequence[Job], key: Callable[[Sequence[str]], Any], worker
     return [g[i:i + cap] for g in groups.values() for i in range(0, len(g), cap)]
 
 
+def die_with_parent(parent: int) -> None:
+    """Make this worker process end when ``parent`` (the launcher) ends, however it ends: a SIGKILLed launcher
+    left its workers computing and then idle until they were killed by hand. On Linux the kernel sends SIGKILL
+    at the parent's death (``prctl(PR_SET_PDEATHSIG)``); everywhere a daemon thread checks once a second whether
+    the worker has been handed to another parent, and ends it then."""
+    import os
+    import threading
+    import time
+
+    try:
+        import ctypes
+        import signal
+        import sys
+
+        if sys.platform.startswith("linux"):
+            ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))  # 1: PR_SET_PDEATHSIG
+    except (OSError, AttributeError):  # no prctl: the thread below does it
+        pass
+    if os.getppid() != parent:  # the parent died before the line above: nobody would send the signal
+        os._exit(1)
+
+    def watch():
+        while os.getppid() == parent:
+            time.sleep(1.0)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="die-with-parent", daemon=True).start()
+
+
+def _worker_start(parent: int, context: bytes) -> None:
+    """A worker's initializer: tied to its parent's life, then given the sweep."""
+    die_with_parent(parent)
+    install(context)
+
+
 def worker_count(n_jobs: int) -> int:
     """Workers for ``n_jobs`` as joblib reads it: -1 every CPU this process may use (cgroup quotas and affinity
     counted, loky's cpu_count), -2 all but one, and so on."""
@@ -139,7 +174,10 @@ def run_jobs(context: SweepContext, jobs: Sequence[Job], workers: int, installed
     chunks = make_chunks(jobs, keyer.group_key, workers)
     workers = min(workers, len(chunks))
     log.info(f"Running {len(jobs)} jobs in {len(chunks)} chunks on {workers} worker processes")
-    pool = ProcessPoolExecutor(max_workers=workers, initializer=install, initargs=(context.dumps(),))
+    import os
+
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_worker_start, initargs=(os.getpid(),
+                                                                                        context.dumps()))
     ok = False
     try:
         futures = [pool.submit(run_chunk, c) for c in chunks]

@@ -63,6 +63,12 @@ class CoveringSweeper(BasicSweeper):
         self.validate_all = validate_all
 
     def validate_batch_is_legal(self, batch: Sequence[Sequence[str]]) -> None:
+        if getattr(self, "_checked", False):  # every batch was checked before the sweep folder was made (sweep)
+            os.environ["STUDY_SWEEP_JOBS"] = str(sum(len(b) for b in self.overrides or [batch]))
+            return
+        self._validate(batch)
+
+    def _validate(self, batch: Sequence[Sequence[str]]) -> None:
         jobs = list(batch) if self.validate_all else covering_jobs(batch)
         tic = time.perf_counter()
         check = _study_check()
@@ -80,6 +86,17 @@ class CoveringSweeper(BasicSweeper):
                  f"({time.perf_counter() - tic:.1f} s)")
 
     def sweep(self, arguments):
+        # every batch's jobs checked before BasicSweeper makes the sweep folder and writes its multirun.yaml: a
+        # refused sweep writes nothing
+        from hydra.core.override_parser.overrides_parser import OverridesParser
+
+        params_conf = self._parse_config()
+        params_conf.extend(arguments)
+        parser = OverridesParser.create(config_loader=self.hydra_context.config_loader)
+        batches = self.split_arguments(parser.parse_overrides(params_conf), self.max_batch_size)
+        self._checked = False
+        self._validate([job for b in batches for job in b])
+        self._checked = True
         returns = super().sweep(arguments)
         try:
             from study.app import sweep_finished

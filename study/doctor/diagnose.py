@@ -175,6 +175,9 @@ class Doctor:
         self.train_names = _names(self.train)
         self.val_names = _names(self.validate) if self.validate else self.train_names
         self.check_messages = []
+        from ..vessel_checks import check_envelope
+
+        check_envelope(vessel_cfg, self.train + self.validate)  # no measurement, whatever checks= says
         if self.opt.checks != "off":
             from ..vessel_checks import check_records
 
@@ -677,7 +680,6 @@ def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: 
     out = Path(out_dir)
     if (out / "report.json").exists() and not overwrite:
         raise FileExistsError(f"{out / 'report.json'} exists; refusing to overwrite it (pass overwrite=true)")
-    (out / "figures").mkdir(parents=True, exist_ok=True)
     rep = doctor.report()
     r = doctor.result
     base, final = r["base"], r["final"]
@@ -731,8 +733,22 @@ def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: 
     for name, df in meas.items():
         mm += maneuver_metrics(name, df, mb.get(name), mf.get(name), doctor.problem.L)
     candidate_metrics(doctor, rep, meas, mb)
+    # the figures go to a temporary folder first and are moved in at once: a doctor stopped meanwhile leaves no
+    # figures/ that would make a rerun refuse ("already holds figures") though no report exists
+    import os
+    import shutil
+
+    partial, final_dir = out / ".figures.partial", out / "figures"
+    shutil.rmtree(partial, ignore_errors=True)
+    partial.mkdir(parents=True)
     for name, data in figs.items():
-        (out / "figures" / name).write_bytes(data)
+        (partial / name).write_bytes(data)
+    if final_dir.is_dir():  # overwrite=true: the new figures replace the old ones of the same name
+        for f in partial.iterdir():
+            os.replace(f, final_dir / f.name)
+        partial.rmdir()
+    else:
+        os.replace(partial, final_dir)
     html_report = {**_jsonable(rep), "title": f"Model doctor: {model} on {vessel}", "created_by":
                    "python -m study.diagnose", "vessel": vessel, "model": model,
                    "structure": doctor.problem.structure.name, "worst_windows": windows,

@@ -107,25 +107,45 @@ def claimed(out: Path, overwrite: bool):
     """Hold ``out`` for one doctor while it works: a second one writing into the same folder is refused at once
     (an exclusive lock, ``<out>/.report.lock``, released when the process ends however it ends), and the folder
     is checked again for a report under the lock (another run may have finished one meanwhile)."""
+    import shutil
+
     from filelock import FileLock, Timeout
 
     from ..cli import OutputExistsError
     from ..settings import existing_report
 
+    made = [p for p in (out, *out.parents) if not p.exists()]  # what this doctor creates (removed if refused)
     out.mkdir(parents=True, exist_ok=True)
     lock = FileLock(str(out / ".report.lock"))
     try:
         lock.acquire(timeout=0)
     except Timeout:
         raise OutputExistsError(f"out={out}: another python -m study.diagnose is writing a report there") from None
+    refused = True
     try:
         there = existing_report(out)
         if there and not overwrite:
             raise OutputExistsError(f"out={out}: {out} already holds {', '.join(there)}; refusing to overwrite a "
                                     "report (overwrite=true to overwrite it, or another out=)")
+        partial = out / PARTIAL_FIGURES  # a doctor stopped while it wrote its figures (none holds the lock now)
+        if partial.exists():
+            shutil.rmtree(partial, ignore_errors=True)
         yield out
+        refused = False
     finally:
         lock.release()
+        if refused and made:  # a refusal or a failure leaves nothing behind in a folder it made
+            shutil.rmtree(out / PARTIAL_FIGURES, ignore_errors=True)
+            (out / ".report.lock").unlink(missing_ok=True)
+            for p in made:
+                try:
+                    p.rmdir()
+                except OSError:
+                    break
+
+
+#: where the doctor writes its figures before they are moved to ``figures/`` (see diagnose.write_report)
+PARTIAL_FIGURES = ".figures.partial"
 
 
 def run(conf: dict) -> dict:
@@ -153,8 +173,10 @@ def run(conf: dict) -> dict:
                   effect_path=tuple([path] if isinstance(path, str) else path), checks=str(conf.get("checks", "error")),
                   anchor=float(conf.get("anchor") or 0.0),
                   keep_setup_effects=bool(conf.get("keep_setup_effects", False)))
+    # every check of the records against the vessel and of the candidates runs here, before the report folder
+    # is made or held: a refusal leaves nothing behind
+    doctor = Doctor(vessel_cfg, conf["model"], train, validate, opt)
     with claimed(out, bool(conf.get("overwrite"))):
-        doctor = Doctor(vessel_cfg, conf["model"], train, validate, opt)
         doctor.run()
         rep = write_report(doctor, conf["out"], conf["vessel"]["name"], conf["model"]["name"],
                            overwrite=bool(conf.get("overwrite")))

@@ -241,8 +241,8 @@ def main(argv=None) -> int:
     if given:
         results = Path(given)
         if not has_table(results):
-            print(f"no results table in {results.resolve()} (run a study first: python -m study -m "
-                  f"experiment=smoke)", file=sys.stderr)
+            print(f"study.figures: error: --results {given}: no results table in {results.resolve()}; expected a "
+                  "results folder (run a study first: python -m study -m experiment=smoke)", file=sys.stderr)
             return 2
     elif has_table(Path("results")):
         results = Path("results")
@@ -251,8 +251,9 @@ def main(argv=None) -> int:
         print(f"study.figures: no results table in {Path('results').resolve()}; rebuilding from the study tables "
               f"committed in {out.resolve()}")
     else:
-        print(f"no results table in {Path('results').resolve()} and no study tables in {out.resolve()} (run a "
-              f"study first: python -m study -m experiment=smoke)", file=sys.stderr)
+        print(f"study.figures: error: results: no results table in {Path('results').resolve()} and no study tables "
+              f"in {out.resolve()}; expected a results folder (run a study first: python -m study -m "
+              "experiment=smoke)", file=sys.stderr)
         return 2
     b = build(results, out, table=not args.no_table)
     print(f"{len(b.written)} outputs in {Path(args.out).resolve()}; claims in {Path(args.out) / 'CLAIMS.md'}")

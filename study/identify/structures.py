@@ -55,6 +55,11 @@ class Segment:
     t: np.ndarray
     data: dict
     record: int
+    source: str = ""  # the record's file (or name), for messages
+
+    @property
+    def where(self) -> str:
+        return self.source or f"record {self.record}"
 
 
 def segments(df: pd.DataFrame, record: int, min_len: int = 3) -> list[Segment]:
@@ -68,7 +73,10 @@ def segments(df: pd.DataFrame, record: int, min_len: int = 3) -> list[Segment]:
     out = []
     for idx in np.split(np.arange(len(t)), cuts):
         if len(idx) >= min_len:
-            out.append(Segment(t[idx], {c: df[c].to_numpy(float)[idx] for c in df.columns if c != "time"}, record))
+            # numeric columns only: a record may carry extra columns of text, which the schema keeps
+            out.append(Segment(t[idx], {c: df[c].to_numpy(float)[idx] for c in df.columns
+                                        if c != "time" and pd.api.types.is_numeric_dtype(df[c])}, record,
+                               str(df.attrs.get("source") or "")))
     return out
 
 
@@ -356,7 +364,7 @@ class Structure:
             h = float(np.median(dt))
             if np.max(np.abs(dt - h)) > 0.05 * h:
                 raise ValueError(f"structure 'smoothed': Savitzky-Golay needs a uniform time step; a segment of "
-                                 f"record {seg.record} has steps from {dt.min():.4g} to {dt.max():.4g} s "
+                                 f"{seg.where} has steps from {dt.min():.4g} to {dt.max():.4g} s "
                                  "(resample it first)")
             w, p = self.window_samples(t), int((self.smoothing or {}).get("polyorder", 3))
             hit = self.rts_states(seg) if self.method == "rts" else None
@@ -376,7 +384,7 @@ class Structure:
         r[0] = (data["psi"][1] - data["psi"][0]) / (seg.t[1] - seg.t[0])
         r[-1] = (data["psi"][-1] - data["psi"][-2]) / (seg.t[-1] - seg.t[-2])
         data["r"] = r
-        return Segment(seg.t, data, seg.record)
+        return Segment(seg.t, data, seg.record, seg.source)
 
     def nodes(self, seg: Segment) -> dict:
         """Node values for the model's node-wise functions: the raw samples, or smoothed ones."""

@@ -292,7 +292,7 @@ class EffectsProblem:
             changed = []
             for eff in effs:
                 changed += eff.transform(self, seg.t, data, values, v, info)
-            seg2 = Segment(seg.t, data, seg.record)
+            seg2 = Segment(seg.t, data, seg.record, seg.source)
             nodes = self._nodes(seg, seg2, changed)
             ops = self.structure.ops(seg2, 1)
             y3, phi3 = self._regressors(seg, v, P0, idx, nodes, seg2, ops, changed)
@@ -336,7 +336,8 @@ class EffectsProblem:
             self._node_cache[key] = self.structure.nodes(seg)
         nodes = dict(self._node_cache[key])
         if changed:
-            nodes.update(self.structure.nodes(Segment(seg.t, {c: seg2.data[c] for c in changed}, seg.record)))
+            nodes.update(self.structure.nodes(Segment(seg.t, {c: seg2.data[c] for c in changed}, seg.record,
+                                                      seg.source)))
         return nodes
 
     def actual_rudder(self, v, t, delta, n):

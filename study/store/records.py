@@ -216,6 +216,42 @@ def check_record(record: Any) -> tuple[list[str], str | None]:
     return errs, cid
 
 
+def _kind(v: Any) -> str | None:
+    """A metric value's kind for its table column: number, text or flag (None and NaN say nothing)."""
+    if v is None or (isinstance(v, float) and v != v):
+        return None
+    if isinstance(v, (bool, np.bool_)):
+        return "a flag"
+    if isinstance(v, (numbers.Number, np.number)):
+        return "a number"
+    return "text" if isinstance(v, str) else type(v).__name__
+
+
+def mistyped_records(items: list) -> dict:
+    """``{file: reason}`` of the records, among ``items`` (``(file, record)`` pairs, each record well-formed on
+    its own), whose metric has the wrong type: text (or a flag) where the other records hold a number. One such
+    value would turn the metric's column into text for every row of ``runs.parquet``; the record is left out
+    instead, by name, as a malformed one is. A metric only some records have, or of one kind in all, is kept
+    (some metrics are text: ``prior_source``, notes, estimator diagnostics)."""
+    kinds: dict = {}
+    for _, rec in items:
+        for k, v in (rec.get("metrics") or {}).items():
+            kd = _kind(v)
+            if kd is not None:
+                kinds.setdefault(k, {}).setdefault(kd, 0)
+                kinds[k][kd] += 1
+    expected = {k: "a number" for k, c in kinds.items() if "a number" in c and len(c) > 1}
+    out: dict = {}
+    for path, rec in items:
+        for k, v in (rec.get("metrics") or {}).items():
+            kd = _kind(v)
+            if k in expected and kd is not None and kd != expected[k]:
+                out[path] = (f"metric {k!r} is {kd} ({v!r}) where the other records hold {expected[k]}; expected "
+                             f"{expected[k]}")
+                break
+    return out
+
+
 def validate_record(record: dict) -> None:
     """Raise ``ValueError`` (with every problem listed) unless ``record`` is a well-formed run record
     (:func:`record_problems`)."""

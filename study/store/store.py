@@ -32,7 +32,7 @@ from filelock import FileLock, Timeout
 from . import tables
 from .files import HOST, atomic_write_bytes, dumps, now_iso, pid_alive, stamp, tmp_owner, tmp_path, unique
 from .provenance import provenance
-from .records import FINISHED_STATUSES, check_artefacts, check_record, ordered, validate_record
+from .records import FINISHED_STATUSES, check_artefacts, check_record, mistyped_records, ordered, validate_record
 
 # a per-run lock is held only for the few ms of a write; the timeout guards against a wedged file system
 _WRITE_LOCK_TIMEOUT = 300.0
@@ -424,7 +424,12 @@ class ResultStore:
                 rep.skipped.append((p, why))
                 warnings.warn(f"skipping record {p}: {why}", RuntimeWarning, stacklevel=3)
                 continue
-            out.append(rec)
+            out.append((p, rec))
+        bad = mistyped_records(out)  # a field of the wrong type would change its column for every row
+        for p, why in bad.items():
+            rep.skipped.append((p, why))
+            warnings.warn(f"skipping record {p}: {why}", RuntimeWarning, stacklevel=3)
+        out = [rec for p, rec in out if p not in bad]
         rep.records = len(out)
         self.report = rep
         return out

@@ -5,7 +5,9 @@ An effect config names its class (``_target_``), its nonlinear parameters and op
 :mod:`.base`. Adding an effect is one class plus one YAML, like an estimator. A user adds their own without
 touching the package: a YAML in a folder of their own, named by ``effect_path=<dir>`` (``python -m
 study.diagnose``) or the environment variable ``STUDY_EFFECT_PATH`` (folders separated by ``:``), whose
-``_target_`` is a class importable from their ``PYTHONPATH``; or a config dict given directly as a candidate.
+``_target_`` is a class importable from their ``PYTHONPATH`` and defined in a module of one of those folders (an
+effect folder is code, and must be trusted: a ``_target_`` elsewhere is refused before anything is imported,
+``study.config.check_target``); or a config dict given directly as a candidate.
 """
 from __future__ import annotations
 
@@ -73,6 +75,11 @@ def make_effect(cfg, extra=()) -> Effect:
     target = cfg.get("_target_")
     if not target:
         raise ValueError(f"{where}: effect '{cfg.get('name')}' has no _target_ (the effect's class path)")
+    from ...config import check_target
+
+    # the trusted-code boundary, before anything is imported: the package's effects, or a module that lies in
+    # one of the effect folders the user named (a folder of effects is code and must be trusted)
+    check_target(target, f"{where}: _target_", plugin_dirs=effect_dirs(extra)[1:])
     try:
         cls = get_class(target)
     except Exception as e:  # hydra wraps import errors in its own type

@@ -31,6 +31,9 @@ def estimator_class(cfg: dict):
     target = cfg.get("_target_")
     if not target:
         raise ValueError(f"estimator config '{cfg.get('name')}' has no _target_ (the estimator's class path)")
+    from ...config import check_target
+
+    check_target(target, "estimator._target_")  # the trusted-code boundary: checked before anything is imported
     try:
         cls = get_class(target)
     except Exception as e:  # hydra wraps import errors in its own type

@@ -11,6 +11,7 @@ import io
 import json
 import math
 import os
+import re
 import uuid
 import warnings
 from dataclasses import dataclass, field
@@ -196,6 +197,31 @@ def _jsonable(meta: dict) -> dict:
     return json.loads(json.dumps(meta, default=lambda o: o.item() if hasattr(o, "item") else str(o)))
 
 
+_DECIMAL_COMMA = re.compile(r"\d,\d")
+
+
+def _csv_hint(body: list) -> str:
+    """Why a CSV table cannot be split into its header's columns (empty when it can): rows with more fields than
+    the header (quoted fields counted as one), most likely numbers written with a decimal comma."""
+    import csv
+
+    if not body:
+        return ""
+    width = len(next(csv.reader([body[0]]), []))
+    if width == 1 and any(sep in body[0] for sep in (";", "\t")):
+        sep = ";" if ";" in body[0] else "a tab"
+        return (f"header {body[0].strip()[:60]!r}: fields separated by {sep}; expected a comma-separated table "
+                "with decimal points (e.g. pandas' to_csv defaults)")
+    for i, ln in enumerate(body[1:51], start=2):
+        fields = next(csv.reader([ln]), [])
+        if ln.strip() and len(fields) > width:
+            m = _DECIMAL_COMMA.search(ln)
+            what = (f"numbers written with a decimal comma ({m.group(0)!r})?" if m else "a comma inside a field?")
+            return (f"line {i} of the table has {len(fields)} fields where the header has {width}: {what} "
+                    "expected comma-separated fields with decimal points")
+    return ""
+
+
 def read_record(path, min_samples: int = 20, states: str = "measured", state_options: dict | None = None,
                 plausibility: str = "error") -> Record:
     """Read and validate a record from ``.csv`` (``# key: value`` metadata lines) or ``.parquet``.
@@ -244,6 +270,9 @@ def read_record(path, min_samples: int = 20, states: str = "measured", state_opt
                         meta[key.strip()] = value.strip()
             else:
                 body.append(ln)
+        hint = _csv_hint(body)
+        if hint:  # more fields than the header: pandas would take the first for an index and shift the rest
+            raise SchemaError(f"{path}: {hint}")
         try:
             df = pd.read_csv(io.StringIO("".join(body)))
         except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
@@ -302,6 +331,15 @@ def _estimate_states(df: pd.DataFrame, meta: dict, path, min_samples: int, lacki
     stand_in = df.assign(**{c: 0.0 for c in lacking})
     # the stand-ins cannot agree with the track: the plausibility checks wait for the estimated u, v, r
     validate(stand_in, path, min_samples=min_samples, plausibility="off" if lacking else plausibility)
+    if plausibility != "off":  # ... but a mirrored track would corrupt the estimate: judged from the track alone
+        from .plausibility import mirrored_track
+
+        with np.errstate(all="ignore"):
+            f = mirrored_track(df.assign(**{c: 0.0 for c in ESTIMABLE}))
+        if f is not None and plausibility == "error":
+            raise SchemaError(f"{_where(path)}: {f.message}")
+        if f is not None:
+            warnings.warn(f"{_where(path)}: {f.message}", RecordWarning, stacklevel=2)
     from .state_estimation import apply_to_frame
 
     src = df.copy()

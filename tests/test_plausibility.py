@@ -217,3 +217,33 @@ def test_simulated_records_pass_at_every_noise(vessel, maneuver):
         with warnings.catch_warnings():
             warnings.simplefilter("error", RecordWarning)
             validate(df, f"{vessel}_{maneuver}_{noise}")
+
+
+def test_swapped_positions_are_refused_with_measured_or_estimated_states(tmp_path, good):
+    """x0 and y0 swapped mirror the track: its course turns against the heading. Judged from positions and heading
+    alone, so the record is refused too when u, v, r are to be estimated from them (states=ekf)."""
+    bad = good.rename(columns={"x0": "y0", "y0": "x0"})
+    _error(tmp_path, bad, r"x0 and y0 swapped", r"swap x0 and y0", r"'x0', 'y0'")
+    with pytest.raises(SchemaError, match="x0 and y0 swapped"):
+        read_record(_write(tmp_path, bad[["time", "x0", "y0", "psi", "delta", "n"]], "pos.csv"), states="ekf")
+    # the unswapped record with positions and heading only is estimated without a finding
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RecordWarning)
+        read_record(_write(tmp_path, good[["time", "x0", "y0", "psi", "delta", "n"]], "ok.csv"), states="ekf")
+
+
+def test_a_decimal_comma_is_refused_naming_the_line(tmp_path, good):
+    p = tmp_path / "comma.csv"
+    good.head(40).to_csv(p, index=False, float_format="%.3f")
+    p.write_text(p.read_text().replace(".", ","))
+    with pytest.raises(SchemaError, match=r"comma\.csv: line 2 of the table has \d+ fields where the header has "
+                                          r"\d+: numbers written with a decimal comma"):
+        read_record(p)
+    p.write_text(good.head(40).to_csv(index=False, sep=";", decimal=","))  # the other European export
+    with pytest.raises(SchemaError, match=r"fields separated by ;"):
+        read_record(p)
+    # a quoted field with a comma is one field, not a decimal comma
+    q = good.head(40).assign(note="a, b")
+    ok = tmp_path / "quoted.csv"
+    q.to_csv(ok, index=False)
+    assert "note" in read_record(ok).data

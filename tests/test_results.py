@@ -838,3 +838,37 @@ def test_app_recomputes_a_run_after_its_estimator_changed(tmp_path):
     runs = pd.read_parquet(results / "runs.parquet")
     assert len(runs) == 1 and bool(runs.loc[0, "code_current"])
     assert "(already finished, resumed)" in run("force=false")
+
+
+def test_a_full_disk_names_the_file_and_leaves_no_temporary(tmp_path, monkeypatch):
+    import errno
+
+    from study.store import files
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(files.os, "fsync", full)
+    target = tmp_path / "runs.parquet"
+    with pytest.raises(OSError) as e:
+        files.atomic_write_bytes(target, b"data")
+    assert e.value.errno == errno.ENOSPC and e.value.filename == str(target) and str(target) in str(e.value)
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_corrupt_table_is_named_and_the_figures_command_says_so_in_one_line(tmp_path):
+    from study.store import TableError
+
+    (tmp_path / "records").mkdir()
+    for name in ("runs.parquet", "params.parquet"):
+        (tmp_path / name).write_bytes(b"not a parquet file")
+    with pytest.raises(TableError, match=r"runs\.parquet: not a readable parquet table .*python -m study\.results "
+                                         r"rebuild"):
+        read_table(tmp_path / "runs.parquet")
+    p = subprocess.run([sys.executable, "-m", "study.figures", "--results", str(tmp_path), "--out",
+                        str(tmp_path / "figs")], capture_output=True, text=True, cwd=tmp_path, timeout=300,
+                       env=dict(os.environ, PYTHONPATH=str(REPO)))
+    lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
+    assert p.returncode == 2 and len(lines) == 1, p.stderr
+    assert lines[0].startswith("study.figures: error: ") and "runs.parquet" in lines[0]
+    assert not (tmp_path / "figs").exists()

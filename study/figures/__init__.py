@@ -197,18 +197,17 @@ def build(results: Path | None, out: Path, table: bool = True) -> Builder:
     from .studies import discover
 
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     studies = discover()
     if results is None:
         sources = committed_tables(out)
-        b = Builder(out, out)
-    else:
+    else:  # read before anything is written: a table that cannot be read leaves no output folder behind
         runs, params = ResultStore(Path(results)).load()
         if len(runs) and "cfg_study" not in runs:
             runs["cfg_study"] = None
         present = set(runs.loc[runs["status"] == "ok", "cfg_study"].dropna()) if len(runs) else set()
         sources = {n: (runs, params, None) for n in present}
-        b = Builder(Path(results), out)
+    out.mkdir(parents=True, exist_ok=True)
+    b = Builder(out if results is None else Path(results), out)
     for name in sorted(set(sources) - set(studies)):
         print(f"study.figures: the table has runs of study '{name}' but no module study/figures/studies/{name}.py; "
               f"nothing built for it", file=sys.stderr)

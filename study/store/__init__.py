@@ -9,10 +9,10 @@ from .records import (FINISHED_STATUSES, NON_SCIENTIFIC_KEYS, PARAM_OPTIONAL, PA
                       REQUIRED_FIELDS, STATUSES, canonical, check_artefacts, record_problems, run_id,
                       scientific_config, validate_record)
 from .store import Claim, ResultsFolderError, ResultStore, StoreReport
-from .tables import PARAM_BASE_COLUMNS, PARAM_CONFIG_COLUMNS, RUN_BASE_COLUMNS, read_table
+from .tables import PARAM_BASE_COLUMNS, PARAM_CONFIG_COLUMNS, RUN_BASE_COLUMNS, TableError, read_table
 
 __all__ = ["Claim", "FINISHED_STATUSES", "NON_SCIENTIFIC_KEYS", "PARAM_BASE_COLUMNS", "PARAM_CONFIG_COLUMNS",
            "PARAM_OPTIONAL", "PARAM_REQUIRED", "PARAM_TEXT", "PROVENANCE_PACKAGES", "REQUIRED_FIELDS",
-           "RUN_BASE_COLUMNS", "ResultStore", "ResultsFolderError", "STATUSES", "StoreReport", "canonical",
+           "RUN_BASE_COLUMNS", "ResultStore", "ResultsFolderError", "STATUSES", "StoreReport", "TableError", "canonical",
            "check_artefacts", "dumps", "provenance", "read_table", "record_problems", "run_id",
            "scientific_config", "validate_record"]

@@ -173,4 +173,13 @@ def read_table(path) -> pd.DataFrame:
     expected". One open pins one inode, so the snapshot is always whole.
     """
     with open(path, "rb") as fh:
-        return pd.read_parquet(io.BytesIO(fh.read()))
+        data = fh.read()
+    try:
+        return pd.read_parquet(io.BytesIO(data))
+    except Exception as e:  # pyarrow's own error types name no file
+        raise TableError(f"{path}: not a readable parquet table ({type(e).__name__}: {e}); expected a table the "
+                         "store wrote: `python -m study.results rebuild` remakes it from the records") from e
+
+
+class TableError(ValueError):
+    """A results table that cannot be read (a torn or foreign file), named by its path."""

@@ -233,6 +233,8 @@ def _run(cfg: DictConfig) -> dict:
                                  wait=not _in_sweep())
     for record in records:
         _say_run(record, store)
+    if not _in_sweep():
+        print(_key_numbers(records, store.root), flush=True)
     failed = [r for r in records if r.get("status") == "failed"]
     if failed and not _in_sweep():  # a sweep goes on; it ends with its count of failed runs (sweep_finished)
         fail(EXIT_FAILED)
@@ -254,6 +256,45 @@ def _say_run(record: dict, store) -> None:
         print(f"study: error: run {record['run_id']} failed: {_reason(record)} (the traceback: "
               f"{store.root / 'records'}/{record['run_id']}.json, or python -m study.results show)",
               file=sys.stderr, flush=True)
+
+
+def _key_numbers(records: list, root: Path) -> str:
+    """What a run found, in two lines: its median coefficient error, the held-out prediction error of each
+    validation manoeuvre's heading and the time (medians and the range over datasets for replicates), and the next
+    command to try."""
+    import numpy as np
+
+    ok = [r for r in records if r.get("status") == "ok"]
+    if not ok:
+        return f"Nothing identified ({', '.join(sorted({str(r.get('status')) for r in records}))})."
+
+    def figure(key: str, scale: float = 1.0, unit: str = "") -> str | None:
+        vals = np.array([float(m[key]) for m in (r.get("metrics") or {} for r in ok)
+                         if isinstance(m.get(key), (int, float))], float) * scale
+        vals = vals[np.isfinite(vals)]
+        if not len(vals):
+            return None
+        if len(vals) == 1:
+            return f"{vals[0]:.3g}{unit}"
+        return f"{np.median(vals):.3g}{unit} (median of {len(vals)} datasets, {vals.min():.3g}-{vals.max():.3g})"
+
+    parts = []
+    drift = figure("drift_median", 100.0, " %")
+    if drift:
+        parts.append(f"median coefficient error {drift}")
+    names = sorted({k[len("val_"):-len("_nrmse_psi")] for r in ok for k in (r.get("metrics") or {})
+                    if k.startswith("val_") and k.endswith("_nrmse_psi")})
+    for n in names:
+        v = figure(f"val_{n}_nrmse_psi")
+        if v:
+            parts.append(f"{n} heading NRMSE {v}")
+    wall = sum(float((r.get("timings") or {}).get("wall") or 0.0) for r in ok if not r.get("resumed"))
+    if wall:
+        parts.append(f"{wall:.1f} s computing")
+    many = len(records) > 1
+    nxt = (f"python -m study.results show --root {root}" if many else
+           "python -m study replicates=20 (the same configuration on 20 independent datasets)")
+    return "Found: " + "; ".join(parts) + f".\nNext: {nxt}; every column: {root / 'runs.parquet'}"
 
 
 def _job_summary(records: list) -> dict:

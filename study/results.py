@@ -34,7 +34,8 @@ def main(argv: list[str] | None = None) -> int:
     for name, help_ in (("rebuild", "rebuild runs.parquet and params.parquet from the records"),
                         ("show", "counts by status and the last 10 runs")):
         p = sub.add_parser(name, help=help_)
-        p.add_argument("--root", default=None, help="results folder (default $STUDY_RESULTS_DIR or results/)")
+        p.add_argument("--root", "--results", dest="root", default=None,
+                       help="results folder (default $STUDY_RESULTS_DIR or results/)")
         if name == "rebuild":
             p.add_argument("--allow-empty", action="store_true",
                            help="write empty tables even over non-empty ones (no well-formed record found)")
@@ -73,12 +74,14 @@ def main(argv: list[str] | None = None) -> int:
           + (f"; {store.report.stale} computed by older code" if store.report.stale else ""))
     if len(runs):
         cols = [col for col in ("run_id", "replicate", "status", "finished", "wall_time", "code_current",
-                                "cfg_vessel.name",
-                                "cfg_model.name", "cfg_structure.name", "cfg_estimator.name", "cfg_noise.name")
-                if col in runs]
+                                "cfg_vessel.name", "cfg_model.name", "cfg_structure.name", "cfg_estimator.name",
+                                "cfg_noise.name", "m_drift_median") if col in runs]
         last = runs.sort_values("finished", kind="stable").tail(10)[cols].copy()
         last["finished"] = last["finished"].dt.strftime("%Y-%m-%d %H:%M:%S")
         last["wall_time"] = last["wall_time"].round(2)
+        if "m_drift_median" in last:  # the median relative error of the run's coefficients, in per cent
+            last["m_drift_median"] = (100 * last["m_drift_median"].astype(float)).round(1)
+            last = last.rename(columns={"m_drift_median": "drift_%"})
         errs = runs.loc[last.index, "error"].map(
             lambda e: str(e).strip().splitlines()[-1][:60] if isinstance(e, str) and e.strip() else "")
         if errs.any():

@@ -12,12 +12,13 @@ Three parts, in one run:
    5 datasets, to keep the benchmark short), the same two ways.
 3. **Projection of every named study** (``conf/experiment/*.yaml`` with a sweep) at 20 datasets per cell on 2
    workers: its cells from the sweep's parameters (a ``seed`` axis is the study's own replication and is
-   replaced by the replicates), a sample of cells per estimator (``--per-stratum``) timed in this process
+   replaced by the replicates), a sample of cells per estimator, structure and sampling interval (``--per-stratum``) timed in this process
    stage by stage (composition; the work shared by the datasets: models, noise-free truth, validation truth;
    the cost of one more dataset: drawing, identifying and validating it, from two datasets), scaled to every
    cell of the stratum. ``projected = sum over cells (compose + shared + 20 x per-dataset) / 2``. For grand,
    which does not fit in an hour, the estimators are ranked by cost and the grid of the cheaper estimators that
-   fits is printed with its time.
+   fits is printed with its time. Each projection is printed beside the run time its committed table records
+   (the sum of its runs' wall times), as a check of the projection itself.
 
 ``python benchmarks/bench_replicates.py [--parts 1,2,3] [--per-stratum 2] [--studies grand,seed000_svr_mmg]``
 writes ``benchmarks/results/bench_replicates.json``. Run it on an otherwise idle machine: part 1 and 2's ratios
@@ -44,6 +45,8 @@ sys.path.insert(0, str(ROOT))
 
 N_CORES = 2
 TARGET_REPLICATES = 20
+#: the axes a study's cells are grouped by for sampling: what sets a run's cost
+STRATA = ("estimator", "structure", "noise.sample_dt_LU")
 GRAND_LIMIT_S = 3600.0
 
 
@@ -130,7 +133,7 @@ def _stage_times(overrides: list[str]) -> dict:
     from study.pipeline import SimulatedJob
 
     t0 = time.perf_counter()
-    conf = compose("config", overrides)
+    conf = compose("config", [*overrides, "progress=false"])
     t_compose = time.perf_counter() - t0
     conf.pop("replicates", None)
     job = SimulatedJob(conf)
@@ -146,12 +149,24 @@ def _stage_times(overrides: list[str]) -> dict:
     return {"compose": t_compose, "shared": t_shared, "dataset": (time.perf_counter() - t0) / 2, "skipped": False}
 
 
+def _committed_seconds(name: str) -> float | None:
+    """The run time of the study's committed table (sum of its runs' wall times, over the cores), or None."""
+    import pandas as pd
+
+    path = ROOT / "paper_figs" / name / "table" / "runs.parquet"
+    if not path.exists():
+        return None
+    w = pd.read_parquet(path, columns=["wall_time"])["wall_time"]
+    return float(w.sum()) / N_CORES
+
+
 def project(name: str, per_stratum: int, rng: random.Random) -> dict:
     cells, seeds = study_cells(name)
     strata: dict = {}
-    for cell in cells:
-        est = next((o.split("=", 1)[1] for o in cell if o.startswith("estimator=")), "(one estimator)")
-        strata.setdefault(est, []).append(cell)
+    for cell in cells:  # cost depends mostly on the estimator, the structure and the sampling interval
+        given = dict(o.split("=", 1) for o in cell)
+        key = " ".join(given.get(a, "-") for a in STRATA)  # estimator first
+        strata.setdefault(key, []).append(cell)
     rows = {}
     for est, members in strata.items():
         sample = rng.sample(members, min(per_stratum, len(members)))
@@ -169,26 +184,35 @@ def project(name: str, per_stratum: int, rng: random.Random) -> dict:
         rep = cells_n * (mean["compose"] + mean["shared"] + TARGET_REPLICATES * mean["dataset"])
         rows[est] = {"cells": cells_n, "sampled": len(times), **{f"{k}_s": v for k, v in mean.items()},
                      "one_dataset_cpu_s": one, "replicated_cpu_s": rep}
+    measured = _committed_seconds(name)
     total_one = sum(r["one_dataset_cpu_s"] for r in rows.values()) / N_CORES
     total_rep = sum(r["replicated_cpu_s"] for r in rows.values()) / N_CORES
+    calib = (f"; its committed table's runs took {measured / 60:.1f} min of run time / {N_CORES} cores (projection / "
+             f"table {total_one / measured:.2f})" if measured else "")
     print(f"{name}: {len(cells)} cells x {seeds} seed(s) as run today: projected {total_one / 60:6.1f} min on "
-          f"{N_CORES} cores; at {TARGET_REPLICATES} datasets per cell: {total_rep / 60:7.1f} min", flush=True)
-    for est, r in sorted(rows.items(), key=lambda kv: -kv[1]["replicated_cpu_s"]):
+          f"{N_CORES} cores{calib}; at {TARGET_REPLICATES} datasets per cell: {total_rep / 60:7.1f} min", flush=True)
+    for est, r in sorted(rows.items(), key=lambda kv: -kv[1]["replicated_cpu_s"])[:12]:
         print(f"    {est:<16} {r['cells']:>5} cells, sampled {r['sampled']}: compose {r['compose_s']:.2f} s, shared "
               f"{r['shared_s']:.2f} s, a dataset {r['dataset_s']:.2f} s -> {r['replicated_cpu_s'] / N_CORES / 60:6.1f} "
               f"min at {TARGET_REPLICATES}", flush=True)
-    out = {"cells": len(cells), "seeds_today": seeds, "projected_today_s": total_one,
+    out = {"cells": len(cells), "seeds_today": seeds, "projected_today_s": total_one, "table_run_time_s": measured,
            "projected_replicated_s": total_rep, "per_estimator": rows}
     if total_rep > GRAND_LIMIT_S:
+        by_est: dict = {}
+        for key, r in rows.items():  # the estimators' whole cost, cheapest first
+            est = key.split()[0]
+            by_est[est] = by_est.get(est, 0.0) + r["replicated_cpu_s"] / N_CORES
         kept, t = [], 0.0
-        for est, r in sorted(rows.items(), key=lambda kv: kv[1]["replicated_cpu_s"]):
-            if t + r["replicated_cpu_s"] / N_CORES > GRAND_LIMIT_S:
+        for est, c in sorted(by_est.items(), key=lambda kv: kv[1]):
+            if t + c > GRAND_LIMIT_S:
                 break
             kept.append(est)
-            t += r["replicated_cpu_s"] / N_CORES
-        out["fits_in_an_hour"] = {"estimators": kept, "projected_s": t}
-        print(f"  {name} at {TARGET_REPLICATES} datasets per cell does not fit in {GRAND_LIMIT_S / 60:.0f} min; the "
-              f"estimators that do, cheapest first: {', '.join(kept)} ({t / 60:.1f} min)", flush=True)
+            t += c
+        out["fits_in_an_hour"] = {"estimators": kept, "projected_s": t, "per_estimator_s": by_est}
+        print(f"  {name} at {TARGET_REPLICATES} datasets per cell does not fit in {GRAND_LIMIT_S / 60:.0f} min; "
+              "per estimator: " + ", ".join(f"{e} {c / 60:.0f}" for e, c in sorted(by_est.items(),
+                                                                                 key=lambda kv: -kv[1]))
+              + f" min; the cheapest that fit together: {', '.join(kept)} ({t / 60:.1f} min)", flush=True)
     return out
 
 
@@ -196,7 +220,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--parts", default="1,2,3")
     ap.add_argument("--repeat", type=int, default=1, help="processes per variant in parts 1 and 2 (median)")
-    ap.add_argument("--per-stratum", type=int, default=2, help="cells timed per estimator in part 3")
+    ap.add_argument("--per-stratum", type=int, default=2,
+                    help="cells timed per estimator, structure and sampling interval in part 3")
     ap.add_argument("--studies", default=None, help="comma-separated studies for part 3 (default: all named)")
     args = ap.parse_args()
     parts = {int(p) for p in args.parts.split(",")}

@@ -234,7 +234,7 @@ def _run(cfg: DictConfig) -> dict:
     for record in records:
         _say_run(record, store)
     if not _in_sweep():
-        print(_key_numbers(records, store.root), flush=True)
+        print(_key_numbers(records, store.root, on_records=data is not None), flush=True)
     failed = [r for r in records if r.get("status") == "failed"]
     if failed and not _in_sweep():  # a sweep goes on; it ends with its count of failed runs (sweep_finished)
         fail(EXIT_FAILED)
@@ -258,7 +258,7 @@ def _say_run(record: dict, store) -> None:
               file=sys.stderr, flush=True)
 
 
-def _key_numbers(records: list, root: Path) -> str:
+def _key_numbers(records: list, root: Path, on_records: bool = False) -> str:
     """What a run found, in two lines: its median coefficient error, the held-out prediction error of each
     validation manoeuvre's heading and the time (medians and the range over datasets for replicates), and the next
     command to try."""
@@ -292,7 +292,7 @@ def _key_numbers(records: list, root: Path) -> str:
     if wall:
         parts.append(f"{wall:.1f} s computing")
     many = len(records) > 1
-    nxt = (f"python -m study.results show --root {root}" if many else
+    nxt = (f"python -m study.results show --root {root}" if many or on_records else
            "python -m study replicates=20 (the same configuration on 20 independent datasets)")
     return "Found: " + "; ".join(parts) + f".\nNext: {nxt}; every column: {root / 'runs.parquet'}"
 

@@ -294,7 +294,9 @@ def _key_numbers(records: list, root: Path, on_records: bool = False) -> str:
     many = len(records) > 1
     nxt = (f"python -m study.results show --root {root}" if many or on_records else
            "python -m study replicates=20 (the same configuration on 20 independent datasets)")
-    return "Found: " + "; ".join(parts) + f".\nNext: {nxt}; every column: {root / 'runs.parquet'}"
+    found = "; ".join(parts) if parts else ("no truth and no held-out records to score the identified model "
+                                            "against (validate=<files> replays held-out records)")
+    return f"Found: {found}.\nNext: {nxt}; every column: {root / 'runs.parquet'}"
 
 
 def _job_summary(records: list) -> dict:

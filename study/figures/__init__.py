@@ -189,6 +189,21 @@ def committed_tables(out: Path) -> dict:
     return found
 
 
+def generic_figures(b: Builder, runs, params, named: set, results: Path) -> None:
+    """The generic figures (``study.figures.generic``) of the runs in ``results`` that no named study claims: those
+    of no study go to ``<out>/<results folder name>/``, those of a study without a module to ``<out>/<study>/``."""
+    from . import generic
+
+    if not len(runs):
+        return
+    study = runs["cfg_study"] if "cfg_study" in runs else pd.Series([None] * len(runs), index=runs.index)
+    free = runs[~study.isin(named)]
+    for label, group in free.groupby(study[free.index].fillna(f"sweep_{results.resolve().name}"), dropna=False):
+        r, p = prepare_tables(group, params[params["run_id"].isin(group["run_id"])])
+        for line in generic.build(b, r, p, str(label)):
+            print(f"study.figures: {line}")
+
+
 def build(results: Path | None, out: Path, table: bool = True) -> Builder:
     """Rebuild the outputs of every study found in the results table (``results``; None: the study tables
     committed under ``out``); compose README.md and CLAIMS.md from every study's index in ``out`` (rebuilt now
@@ -210,12 +225,14 @@ def build(results: Path | None, out: Path, table: bool = True) -> Builder:
     b = Builder(out if results is None else Path(results), out)
     for name in sorted(set(sources) - set(studies)):
         print(f"study.figures: the table has runs of study '{name}' but no module study/figures/studies/{name}.py; "
-              f"nothing built for it", file=sys.stderr)
+              f"its generic figures are built", file=sys.stderr)
     for name, mod in studies.items():
         if name in sources:
             runs, params, root = sources[name]
             b.artefact_roots = [root] if root is not None else []
             build_study(b, mod, runs, params, table=table)
+    if results is not None:  # runs no named study claims: the generic comparison of whatever the sweep varied
+        generic_figures(b, runs, params, set(studies), Path(results))
     indexes = read_indexes(out)
     not_built = [n for n in studies if n not in indexes]
     seeds = {n: m.SEED for n, m in studies.items()}

@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import re
 import sys
 import traceback
 
@@ -98,12 +99,49 @@ def message(exc: BaseException) -> str:
     return "; ".join(p.rstrip(".") if i < len(parts) - 1 else p for i, p in enumerate(parts)) or type(exc).__name__
 
 
+_OVERRIDE = re.compile(r"Could not override '([^']+)'")
+_MISSING_OPTION = re.compile(r"Could not find '([^'/]+)/([^']+)'")
+
+
+def did_you_mean(exc: BaseException) -> str | None:
+    """For a misspelt setting or option, one line naming it and the closest names there are, instead of Hydra's
+    advice to add ``+key`` (which would add the misspelt key as a new one): from the configuration node OmegaConf
+    attaches to its error (a key) or the options Hydra lists (a group's option). None for any other error."""
+    import difflib
+
+    text = str(exc)
+    m = _OVERRIDE.search(text)
+    if m:
+        key = m.group(1)
+        node, c = None, exc
+        while c is not None and node is None:
+            node = getattr(c, "parent_node", None)
+            c = c.__cause__ or c.__context__
+        names = [str(k) for k in node.keys()] if node is not None and hasattr(node, "keys") else []
+        leaf = key.rsplit(".", 1)[-1]
+        close = difflib.get_close_matches(leaf, names, n=3, cutoff=0.6)
+        where = key.rsplit(".", 1)[0] + "." if "." in key else ""
+        hint = (f"did you mean {', '.join(repr(where + c) for c in close)}?" if close else
+                f"expected one of {', '.join(names)}" if names else "expected a setting of the configuration")
+        return (f"{key}: no such setting; {hint} (a new key, not a misspelt one, is added with +{key}=...; "
+                "--help lists the settings)")
+    m = _MISSING_OPTION.search(text)
+    if m:
+        group, option = m.group(1), m.group(2)
+        avail = text.split("\nConfig search path:")[0].split("Available options in", 1)
+        options = re.findall(r"[\w.-]+", avail[1].split(":", 1)[1]) if len(avail) > 1 and ":" in avail[1] else []
+        close = difflib.get_close_matches(option, options, n=3, cutoff=0.5)
+        return (f"{group}={option}: no such option" + (f"; did you mean {', '.join(close)}?" if close else "")
+                + (f" (expected one of {', '.join(options)})" if options else ""))
+    return None
+
+
 def report(exc: BaseException, prog: str) -> int:
     """Print ``exc`` for the user (the traceback too when :func:`verbose`); returns the exit status."""
     if verbose():
         traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
     if isinstance(exc, _user_errors()):
-        print(f"{prog}: error: {message(exc)}", file=sys.stderr, flush=True)
+        print(f"{prog}: error: {did_you_mean(exc) or message(exc)}", file=sys.stderr, flush=True)
         return EXIT_USAGE
     hint = "" if verbose() else f" (unexpected; run again with {VERBOSE_FLAG} or {VERBOSE_ENV}=1 for the traceback)"
     print(f"{prog}: error: {type(exc).__name__}: {message(exc)}{hint}", file=sys.stderr, flush=True)

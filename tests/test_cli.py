@@ -304,3 +304,17 @@ def test_sweep_progress_shows_the_total(tmp_path):
     assert "[study] job 2/2: skipped" in p.stdout and "sweep finished: 2 jobs, 2 skipped" in p.stdout
     recs = [json.loads(f.read_text()) for f in (results / "records").glob("*.json")]
     assert sorted(r["status"] for r in recs) == ["skipped", "skipped"]
+
+
+@pytest.mark.parametrize("module,args,expect", [
+    ("study", ["estimatr=ridge"], "estimatr: no such setting; did you mean 'estimator'?"),
+    ("study", ["sim.dtt=0.1"], "sim.dtt: no such setting; did you mean 'sim.dt'?"),
+    ("study", ["estimator=ridg"], "estimator=ridg: no such option; did you mean ridge?"),
+    ("study.simulate", ["out=x.csv", "manuver=zigzag_10_10"], "manuver: no such setting; did you mean 'maneuver'?"),
+])
+def test_a_misspelt_setting_gets_did_you_mean_not_the_plus_key_advice(tmp_path, module, args, expect):
+    p = _cmd(module, *args, cwd=tmp_path)
+    line = _one_line(p)
+    assert p.returncode == 2 and line.startswith(f"{module}: error: ") and expect in line, line
+    assert "To append to your config" not in line
+    assert not any(tmp_path.iterdir())  # refused before anything is written

@@ -38,17 +38,44 @@ from typing import ClassVar
 import numpy as np
 
 
-def as_arrays(X, y=None):
-    """(X as float array, y as float array or None, column names) from arrays or a DataFrame."""
+_NO_TARGET = object()  # as_arrays(X) for predict: no target asked for (None passed for one is an error)
+
+
+def as_arrays(X, y=_NO_TARGET):
+    """(X as float array, y as float array or None, column names) from arrays or a DataFrame, refused with
+    scikit-learn's messages where its conventions name one (sparse, complex, empty, missing or 2-D targets)."""
+    if hasattr(X, "tocsr") or hasattr(X, "toarray"):
+        raise TypeError("sparse input is not supported: expected a dense 2-D array of regressors (X.toarray())")
     names = [str(c) for c in X.columns] if hasattr(X, "columns") else None
-    Xa = np.asarray(X, dtype=float)
+    Xa = np.asarray(X)
+    yc = None if y is None or y is _NO_TARGET else np.asarray(y)
+    if np.iscomplexobj(Xa) or (yc is not None and np.iscomplexobj(yc)):
+        raise ValueError("Complex data not supported: expected real regressors and targets")
+    Xa = Xa.astype(float)
     if Xa.ndim != 2:
-        raise ValueError(f"X must be 2-D (samples x regressors), got shape {Xa.shape}")
+        raise ValueError(f"X must be 2-D (samples x regressors), got shape {Xa.shape}: Reshape your data with "
+                         "X.reshape(-1, 1) for one regressor or X.reshape(1, -1) for one sample")
+    if Xa.shape[0] == 0:
+        raise ValueError(f"Found array with 0 sample(s) (shape={Xa.shape}) while a minimum of 1 is required.")
+    if Xa.shape[1] == 0:
+        raise ValueError(f"Found array with 0 feature(s) (shape={Xa.shape}) while a minimum of 1 is required.")
     if names is None:
         names = [f"x{i}" for i in range(Xa.shape[1])]
+    if y is None:
+        raise ValueError("this estimator requires y to be passed, but the target y is None")
     ya = None
-    if y is not None:
-        ya = np.asarray(y, dtype=float).ravel()
+    if y is not _NO_TARGET:
+        ya = yc.astype(float)
+        if ya.ndim == 2 and ya.shape[1] == 1:
+            import warnings
+
+            from sklearn.exceptions import DataConversionWarning  # only here: scikit-learn costs a second to import
+
+            warnings.warn("A column-vector y was passed when a 1d array was expected: y.ravel() used",
+                          DataConversionWarning, stacklevel=3)
+        elif ya.ndim != 1:
+            raise ValueError(f"y should be a 1d array (one target), got shape {ya.shape}")
+        ya = ya.ravel()
         if ya.shape[0] != Xa.shape[0]:
             raise ValueError(f"X has {Xa.shape[0]} rows but y has {ya.shape[0]}")
     if not (np.all(np.isfinite(Xa)) and (ya is None or np.all(np.isfinite(ya)))):
@@ -85,6 +112,18 @@ class Estimator:
 
         return RegressorMixin.score(self, X, y, sample_weight=sample_weight)
 
+    #: scikit-learn before 1.6 reads the estimator type from this attribute, later versions from the tags
+    _estimator_type: ClassVar[str] = "regressor"
+
+    def __sklearn_tags__(self):
+        """scikit-learn's tags (1.6 and later: ``is_regressor``, ``cross_val_score`` and ``check_estimator`` ask for
+        them): a regressor of a dense, finite, 2-D ``X`` and a 1-D ``y``, as :func:`as_arrays` requires."""
+        from sklearn.utils import InputTags, RegressorTags, Tags, TargetTags
+
+        return Tags(estimator_type="regressor", target_tags=TargetTags(required=True, single_output=True),
+                    regressor_tags=RegressorTags(), input_tags=InputTags(two_d_array=True, allow_nan=False,
+                                                                         sparse=False))
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}({', '.join(f'{k}={v!r}' for k, v in self.get_params(deep=False).items())})"
 
@@ -105,11 +144,19 @@ class Estimator:
         raise NotImplementedError(f"{type(self).__name__} does not fit output-error problems")
 
     def predict(self, X):
-        Xa = np.asarray(X, dtype=float)
+        if not hasattr(self, "coef_"):
+            from sklearn.exceptions import NotFittedError
+
+            raise NotFittedError(f"This {type(self).__name__} instance is not fitted yet: call fit first")
+        Xa, _, _ = as_arrays(X)
+        if Xa.shape[1] != len(np.ravel(self.coef_)):
+            raise ValueError(f"X has {Xa.shape[1]} features, but {type(self).__name__} is expecting "
+                             f"{len(np.ravel(self.coef_))} features as input")
         return Xa @ self.coef_ + getattr(self, "intercept_", 0.0)
 
     def _init_outputs(self, k: int) -> None:
         """Reset the optional learned attributes before a fit (so a refit leaves no stale ones)."""
+        self.n_features_in_ = int(k)
         self.intercept_ = 0.0
         self.diagnostics_ = {}
         self.artefacts_ = {}

@@ -313,6 +313,8 @@ class EmceeSampler(Estimator):
 
         X, y, _ = as_arrays(X, y)
         k = X.shape[1]
+        if X.shape[0] < 2:
+            raise ValueError(f"n_samples = {X.shape[0]}: emcee needs at least 2 samples")
         rank = np.linalg.matrix_rank(X)
         if rank < k:
             raise ValueError(f"emcee: the regressors are rank-deficient (rank {rank} of {k}); the posterior is "
@@ -337,6 +339,8 @@ class EmceeSampler(Estimator):
             raise ValueError(f"emcee: likelihood must be one of {self.LIKELIHOODS}, got {self.likelihood!r}")
         X, y, names = as_arrays(X, y)
         n, k = X.shape
+        if n < 2:
+            raise ValueError(f"n_samples = {n}: emcee needs at least 2 samples")
         self._init_outputs(k)
         # the fitted row-noise model (its whitening is the posterior's GLS map; None: the rows as they are, least
         # squares), kept so that the run can tell whether its intervals are trusted (study.identify.truncation)

@@ -22,7 +22,8 @@ def check_regression(X, y):
     if ya is None:
         raise ValueError("y is required")
     if Xa.shape[0] < 2 or Xa.shape[1] < 1:
-        raise ValueError(f"need at least 2 samples and 1 regressor, got X of shape {Xa.shape}")
+        raise ValueError(f"n_samples = {Xa.shape[0]}: need at least 2 samples and 1 regressor, got X of shape "
+                         f"{Xa.shape}")
     return Xa, ya, names
 
 
@@ -246,6 +247,7 @@ class Lasso(Estimator):
                 converged = False
             else:
                 warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        self.n_iter_ = int(np.max(model.n_iter_))  # coordinate-descent iterations of the final fit
         b = np.asarray(model.coef_, dtype=float)
         selected = b != 0.0
         if self.refit and selected.any():

@@ -83,6 +83,7 @@ class SINDy(Estimator):
             # "eliminated all coefficients" is an outcome here (a too-large candidate threshold), not an error
             warnings.filterwarnings("ignore", message="Sparsity parameter is too big")
             opt.fit(Z, y)
+        self.n_iter_ = max(1, len(getattr(opt, "history_", []) or []))  # iterations of the last fit made
         coef = np.asarray(opt.coef_, dtype=float)
         if coef.shape != (1, Z.shape[1]):  # pysindy returns (n_targets, n_features)
             raise RuntimeError(f"unexpected pysindy coef_ shape {coef.shape}")

@@ -1,0 +1,34 @@
+"""Every discovered estimator passes scikit-learn's own estimator checks (``check_estimator``) on the installed
+scikit-learn: ``clone``, ``is_regressor``, ``cross_val_score`` and pipelines work on them, and they refuse what
+scikit-learn's conventions refuse (sparse, complex, empty, missing or 2-D targets) with its messages."""
+import warnings
+
+import numpy as np
+import pytest
+
+from study.config import read_config
+from study.identify.estimators import list_estimators, make_estimator
+
+
+@pytest.mark.parametrize("name", list_estimators())
+def test_the_estimator_passes_scikit_learns_checks(name):
+    from sklearn.utils.estimator_checks import check_estimator
+
+    est = make_estimator(read_config("estimator", name))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        results = check_estimator(est, on_fail=None)
+    failed = {r["check_name"]: str(r["exception"])[:200] for r in results if r["status"] == "failed"}
+    assert len(results) > 40 and not failed, failed
+
+
+def test_scikit_learn_sees_a_regressor_and_cross_validates_it():
+    from sklearn.base import clone, is_regressor
+    from sklearn.model_selection import cross_val_score
+
+    est = make_estimator(read_config("estimator", "ridge"))
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(60, 3))
+    y = X @ np.array([1.0, -2.0, 0.5]) + 0.01 * rng.normal(size=60)
+    assert is_regressor(est) and clone(est).get_params() == est.get_params()
+    assert np.all(cross_val_score(est, X, y, cv=3) > 0.99)

@@ -30,22 +30,25 @@ OKABE_ITO = ["#E69F00", "#56B4E9", "#009E73", "#F0E442", "#0072B2", "#D55E00", "
 #: posterior bands and truth lines of the emcee figures
 OKABE_BLUE = "#0072B2"
 
-#: estimator -> (colour, marker), the same in every figure. Tol's nine muted colours and three Okabe-Ito colours
-#: that stay apart from them (tested: tests/test_figure_style.py); each estimator also has its own marker, so
-#: two estimators differ even in greyscale. A new estimator (conf/estimator/<name>.yaml) needs its entry here
-#: (the test fails without it; until then it is drawn grey with a marker picked from its name).
+#: estimator -> (colour, marker), the same in every figure. Twelve colours drawn from matplotlib's tab10 and tab20,
+#: Okabe & Ito's set and Tol's muted and vibrant schemes, chosen so that any two are at least 20 apart in CIEDE2000
+#: (G. Sharma, W. Wu, E. N. Dalal, "The CIEDE2000 color-difference formula", Color Res. Appl. 30, 2005) and every
+#: one has a CIE lightness L* of 30-72: no near-black line beside the black truth, no pale line on white, and no
+#: two dark purples (tested: tests/test_figure_style.py). Each estimator also has its own marker, so two estimators
+#: differ even in greyscale. A new estimator (conf/estimator/<name>.yaml) needs its entry here (the test fails
+#: without it; until then it is drawn grey with a marker picked from its name).
 ESTIMATOR_STYLE = {
-    "ls": ("#332288", "o"),            # indigo
-    "ridge": ("#88CCEE", "s"),         # cyan
-    "lasso": ("#44AA99", "^"),         # teal
-    "lssvm": ("#117733", "v"),         # green
-    "tlssvm": ("#999933", "D"),        # olive
-    "lssvm_online": ("#DDCC77", "<"),  # sand
-    "svr_eps": ("#CC6677", ">"),       # rose
-    "svr_nu": ("#882255", "P"),        # wine
-    "sindy": ("#AA4499", "X"),         # purple
+    "ls": ("#1F77B4", "o"),            # tab10 blue
+    "ridge": ("#33BBEE", "s"),         # Tol vibrant cyan
+    "lasso": ("#44AA99", "^"),         # Tol muted teal
+    "lssvm": ("#117733", "v"),         # Tol muted green
+    "tlssvm": ("#999933", "D"),        # Tol muted olive
+    "lssvm_online": ("#C49C94", "<"),  # tab20 light brown
+    "svr_eps": ("#EE3377", ">"),       # Tol vibrant magenta
+    "svr_nu": ("#882255", "P"),        # Tol muted wine
+    "sindy": ("#9467BD", "X"),         # tab10 purple
     "de": ("#E69F00", "*"),            # Okabe-Ito orange
-    "emcee": ("#0072B2", "h"),         # Okabe-Ito blue
+    "emcee": ("#8C564B", "h"),         # tab10 brown
     "map": ("#D55E00", "p"),           # Okabe-Ito vermillion
 }
 

@@ -245,3 +245,26 @@ def test_emcee_figures_are_fit_for_print_and_the_band_is_visible(tmp_path):
     dev = [lim for lab, lim in b.axes["posterior_band_zigzag_35_35"] if lab.startswith("r - median")]
     width = 2e-3 * 0.75  # q95 - q05 of r in deg/s
     assert dev and dev[0][1] - dev[0][0] < 3 * width  # the band fills a third of its axes or more
+
+
+def test_signed_axis_is_chosen_from_the_data_with_plain_ticks():
+    """Values of either sign reaching hundreds: symmetric-log ticks at 0, +-1, +-10, +-100 written plainly (not
+    '-10^0' or '7.60718x10^-1'); small values of either sign: a linear axis; positive values: a log axis."""
+    from study.figures.style import signed_axis
+
+    plt = _plt()
+    fig, axes = plt.subplots(1, 3, figsize=(7, 2.5), layout="constrained")
+    cases = (([-312.0, -23.0, 0.4, 7.8, 150.0], "symlog"), ([-0.14, -0.01, 0.3, 0.76], "linear"),
+             ([0.9, 3.0, 80.0], "log"))
+    for ax, (y, want) in zip(axes, cases):
+        ax.plot(range(len(y)), y)
+        assert signed_axis(ax, y) == want
+        ax.set_xlabel("h/T [-]")
+        ax.set_ylabel("K' [-]")
+    fig.canvas.draw()
+    labels = [t.get_text() for t in axes[0].get_yticklabels() if t.get_text()]
+    assert labels == ["-100", "-10", "-1", "0", "1", "10", "100"], labels
+    for ax in axes[1:]:
+        assert all("10^" not in t.get_text() and "times" not in t.get_text() for t in ax.get_yticklabels())
+    assert readability_problems(fig) == []
+    plt.close(fig)

@@ -465,39 +465,63 @@ def lcurve_figure(b: Builder, study: str, entries: list, eq: str = "N"):
              "corner")
 
 
+#: the convergence figures' axis: estimate / truth, linear within +-CONV_LINEAR (a coefficient within its truth's
+#: size of the truth), logarithmic beyond, so no coefficient is cut off
+CONV_LINEAR = 2.0
+
+
 def convergence_figure(b: Builder, study: str, run, params, name: str, label: str, title: str | None = None):
-    """Every coefficient of an incremental LS-SVM run against the number of samples, over its truth. ``label``
-    describes the output (README), ``title`` (default: the run's set-up) heads the figure."""
+    """Every coefficient of an incremental LS-SVM run against the number of samples, over its truth, on a
+    symmetric-log axis (linear within +-2, logarithmic beyond: every coefficient shown, however far off). The
+    coefficients that end beyond twice their truth (on the logarithmic part) are named in the title and in the
+    caption with their final ratio. ``label`` describes the output (README), ``title`` (default: the run's
+    set-up) heads the figure."""
+    from .style import signed_axis
+
     plt = _plt()
     tru = params[params["run_id"] == run["run_id"]].set_index("name")["truth"]
     eqs = [e for e in ("X", "Y", "N") if b.artefact(run["run_id"], f"{e}/convergence.csv") is not None]
     if not eqs:
         return
-    fig, axes = plt.subplots(len(eqs), 1, figsize=(PRINT_WIDTH_IN, 2.0 * len(eqs) + 0.7), sharex=True,
+    fig, axes = plt.subplots(len(eqs), 1, figsize=(PRINT_WIDTH_IN, 2.3 * len(eqs) + 0.9), sharex=True,
                              squeeze=False, layout="constrained")
     markers = ["o", "s", "^", "v", "D", "<", ">", "P", "X"]
+    far = []  # (coefficient, final estimate / truth) beyond +-CONV_LINEAR at the last sample
     for ax, eq in zip(axes[:, 0], eqs):
         cv = b.artefact_csv(run["run_id"], f"{eq}/convergence.csv")
         by_truth = any(c in tru for c in cv.columns[1:])
         cols = [c for c in cv.columns[1:] if c != "intercept"]
         every = max(1, len(cv) // 10)
+        ys = [np.array([1.0])]
         for k, c in enumerate(cols):
             st = {"color": TOL_MUTED[k % len(TOL_MUTED)], "marker": markers[k % len(markers)], "markevery": every,
                   "ms": 4, "lw": 1.0}
             ref = tru.get(c) if by_truth else cv[c].iloc[-1]  # regression coefficients (Nomoto): / final value
             if ref is not None and np.isfinite(ref) and ref != 0:
-                ax.plot(cv.iloc[:, 0], cv[c] / ref, label=c, **st)
+                y = (cv[c] / ref).to_numpy(float)
+                last = y[np.isfinite(y)][-1] if np.isfinite(y).any() else np.nan
+                off = np.isfinite(last) and abs(last) > CONV_LINEAR
+                if off:
+                    far.append((c, last))
+                ax.plot(cv.iloc[:, 0], y, label=f"{c} (ends at {last:.3g})" if off else c, **st)
+                ys.append(y)
             elif c in tru:
-                ax.plot(cv.iloc[:, 0], cv[c], ls=":", label=f"{c} (truth 0: the estimate)", **st)
+                y = cv[c].to_numpy(float)
+                ax.plot(cv.iloc[:, 0], y, ls=":", label=f"{c} (truth 0: the estimate)", **st)
+                ys.append(y)
         ax.axhline(1.0, color="k", lw=0.8)
-        ax.set_ylim(-1, 3)
+        signed_axis(ax, np.concatenate(ys), linthresh=CONV_LINEAR, linear_below=3.0, linscale=1.5, inner=(1.0,),
+                    allow_log=False)
         ax.set_ylabel(f"{eq}: estimate / {'truth' if by_truth else 'final value'} [-]")
         ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), ncol=1 if len(cols) <= 8 else 2)
     axes[-1, 0].set_xlabel("samples used [-]")
-    fig.suptitle(_wrap(f"Incremental LS-SVM: each coefficient against the samples used ({title or _run_setup(run)}; "
-                       "axis cut at -1 and 3)"))
+    note = (f"ending beyond {CONV_LINEAR:g} times the truth (estimate / truth at the last sample): "
+            + ", ".join(f"{c} {v:.3g}" for c, v in far) if far else
+            f"every coefficient ends within {CONV_LINEAR:g} times its truth")
+    fig.suptitle(_wrap(f"Incremental LS-SVM: each coefficient against the samples used ({title or _run_setup(run)}); "
+                       f"symmetric-log axis, linear within ±{CONV_LINEAR:g}; {note}"))
     b.figure(fig, study, name, f"convergence of every coefficient against the number of samples, incremental LS-SVM "
-             f"({label})")
+             f"({label}; {note})")
 
 
 def _run_setup(run) -> str:

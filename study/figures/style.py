@@ -125,12 +125,13 @@ def log_ticks(ax, axis: str = "y") -> None:
     ax_.set_minor_formatter(NullFormatter())
 
 
-def signed_axis(ax, values, axis: str = "y", linthresh: float = 1.0, linear_below: float = 5.0) -> str:
+def signed_axis(ax, values, axis: str = "y", linthresh: float = 1.0, linear_below: float = 5.0,
+                linscale: float = 1.0, inner: tuple = (), allow_log: bool = True) -> str:
     """An axis chosen from the values it shows, with labelled ticks a reader can read: log (with :func:`log_ticks`)
-    when every value is positive; linear when values change sign but none exceeds ``linear_below`` in magnitude;
-    else symmetric-log, linear within +-``linthresh``, with ticks at 0 and +-linthresh x 10^k written plainly
-    (-100, -10, -1, 0, 1, 10, 100), never matplotlib's default symlog labels. Call it after the last plot on the
-    axes. Returns the scale chosen."""
+    when every value is positive (and ``allow_log``); linear when none exceeds ``linear_below`` in magnitude;
+    else symmetric-log, linear within +-``linthresh`` (stretched to ``linscale`` decades each side), with ticks at
+    0, +-``inner``, +-``linthresh`` and every power of ten beyond, written plainly (-100, -10, -1, 0, 1, 10, 100),
+    never matplotlib's default symlog labels. Call it after the last plot on the axes. Returns the scale chosen."""
     from matplotlib.ticker import FixedLocator, FuncFormatter, MaxNLocator, NullLocator
 
     v = np.asarray(values, dtype=float)
@@ -138,7 +139,7 @@ def signed_axis(ax, values, axis: str = "y", linthresh: float = 1.0, linear_belo
     ax_ = ax.yaxis if axis == "y" else ax.xaxis
     set_scale = ax.set_yscale if axis == "y" else ax.set_xscale
     plain = FuncFormatter(lambda x, _: f"{x:g}")
-    if len(v) and (v > 0).all():
+    if allow_log and len(v) and (v > 0).all():
         set_scale("log")
         log_ticks(ax, axis)
         return "log"
@@ -147,11 +148,13 @@ def signed_axis(ax, values, axis: str = "y", linthresh: float = 1.0, linear_belo
         ax_.set_major_locator(MaxNLocator(nbins=6))
         ax_.set_major_formatter(plain)
         return "linear"
-    set_scale("symlog", linthresh=linthresh)
+    set_scale("symlog", linthresh=linthresh, linscale=linscale)
     lo, hi = ax.get_ylim() if axis == "y" else ax.get_xlim()
     lo, hi = min(lo, hi), max(lo, hi)
-    k = int(math.ceil(math.log10(max(abs(lo), abs(hi)) / linthresh))) if max(abs(lo), abs(hi)) > linthresh else 0
-    ticks = [0.0] + [sgn * linthresh * 10 ** e for e in range(k + 1) for sgn in (-1, 1)]
+    top = max(abs(lo), abs(hi))
+    # the decades (10, 100, ...) beyond the threshold, and the threshold itself
+    decades = [10.0 ** e for e in range(math.ceil(math.log10(linthresh) + 1e-9), math.ceil(math.log10(top)) + 1)]
+    ticks = [0.0] + [sgn * t for t in {*inner, linthresh, *(d for d in decades if d > linthresh)} for sgn in (-1, 1)]
     ax_.set_major_locator(FixedLocator(sorted(t for t in ticks if lo <= t <= hi)))
     ax_.set_major_formatter(plain)
     ax_.set_minor_locator(NullLocator())

@@ -568,6 +568,9 @@ def emcee_figures(b: Builder, study: str, run, params, maneuver: str = "zigzag_3
     band = b.artefact_csv(run["run_id"], f"validation/{maneuver}_band.csv")
     if band is not None:
         chans = [c for c in ("u", "v", "r", "psi") if f"q50_{c}" in band]
+        inside = {c: float(((band[f"q05_{c}"] <= band[f"truth_{c}"]) & (band[f"truth_{c}"] <= band[f"q95_{c}"])).mean())
+                  for c in chans}
+        verdict = band_coverage_note(run, params, inside)
         fig, axes = plt.subplots(2 * len(chans), 1, figsize=(PRINT_WIDTH_IN * 0.85, 2.6 * len(chans) + 1.0),
                                  sharex=True, squeeze=False, layout="constrained",
                                  gridspec_kw={"height_ratios": [1.6, 1.0] * len(chans)})
@@ -581,6 +584,7 @@ def emcee_figures(b: Builder, study: str, run, params, maneuver: str = "zigzag_3
             ax.plot(t, q50, color=OKABE_BLUE, lw=1.2, label="posterior median")
             ax.plot(t, truth, color="black", ls="--", lw=1.1, label="truth")
             ax.set_ylabel(f"{c} [{u}]")
+            ax.set_title(f"{c}: the truth inside the 90 % band at {100 * inside[c]:.0f} % of the samples", loc="left")
             dev.fill_between(t, q05 - q50, q95 - q50, **fill)
             dev.plot(t, truth - q50, color="black", ls="--", lw=1.1)
             dev.axhline(0.0, color=OKABE_BLUE, lw=1.0)
@@ -591,9 +595,31 @@ def emcee_figures(b: Builder, study: str, run, params, maneuver: str = "zigzag_3
         h, lab = axes[0, 0].get_legend_handles_labels()
         fig.legend(h, lab, loc="outside lower center", ncol=3)
         fig.suptitle(_wrap(f"{maneuver}: posterior-predictive band of emcee ({setup}; {int(band['draws'].iloc[0])} "
-                           "draws); below each channel: the band and the truth less the posterior median"))
+                           f"draws); below each channel: the band and the truth less the posterior median. {verdict}"))
         b.figure(fig, study, f"posterior_band_{maneuver}", f"posterior-predictive band of the {maneuver} (emcee, "
-                 f"{run['cfg_structure.name']})")
+                 f"{run['cfg_structure.name']}). {verdict}")
+
+
+def band_coverage_note(run, params, inside: dict) -> str:
+    """What a posterior-predictive figure's dataset shows, from its numbers: whether the run's 90 % parameter
+    intervals hold the truth (how many of how many, which miss) and the share of the plotted record at which the
+    truth lies inside the 90 % band, per channel (``inside``: channel -> share)."""
+    pr = params[params["run_id"] == run["run_id"]]
+    pr = pr[pr["ci_low"].notna() & pr["ci_high"].notna() & pr["truth"].notna()] if "ci_low" in pr else pr.iloc[:0]
+    hit = (pr["ci_low"] <= pr["truth"]) & (pr["truth"] <= pr["ci_high"])
+    missed = list(pr.loc[~hit, "name"])
+    band = ", ".join(f"{100 * v:.0f} % of the {c} samples" for c, v in inside.items())
+    short = [c for c, v in inside.items() if v < 0.9]
+    if not len(pr):
+        par = "No parameter intervals recorded"
+    elif missed:
+        par = (f"This dataset's 90 % intervals miss the truth for {len(missed)} of {len(pr)} parameters "
+               f"({', '.join(missed)})")
+    else:
+        par = f"This dataset's 90 % intervals hold the truth for all {len(pr)} parameters"
+    rec = (f"the 90 % band holds the truth at {band}" + (" (below 90 %: the band misses the truth over much of the "
+           "record)" if short else ""))
+    return f"{par}; {rec}."
 
 
 def _pct(x) -> str:

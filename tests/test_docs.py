@@ -1,7 +1,8 @@
 """What the README and the documentation site promise, checked: the README is a landing page of at most 250 lines
 with the two quickstart commands CI runs; the configuration page's group table lists every option of every group
 in conf/; the studies page's claims table is ``paper_figs/CLAIMS.md``'s; the site builds with ``mkdocs build
---strict``; and without the real data ``python -m study.reality_check`` stops with one line saying where it looked
+--strict``; every file under ``paper_figs/`` that the README or a documentation page links, shows or names exists
+(also where mkdocs is not installed); and without the real data ``python -m study.reality_check`` stops with one line saying where it looked
 and how to point at the data (not a KeyError). The layer table (docs/concepts/architecture.md) is checked
 against ``.importlinter`` by tests/test_architecture.py."""
 import re
@@ -37,6 +38,62 @@ def test_the_readme_links_resolve():
     assert links
     missing = [t for t in links if not (ROOT / t).exists()]
     assert not missing, f"README.md links to {missing}"
+
+
+#: a Markdown link or image target, ``[text](target)`` or ``![alt](target "title")``, without its #anchor
+LINK = re.compile(r"\]\(\s*<?([^)\s>#]+)(?:#[^)\s]*)?>?(?:\s+\"[^\"]*\")?\s*\)")
+#: a file under paper_figs/ named in code (`paper_figs/CLAIMS.md`), not a pattern (`paper_figs/<study>/`)
+NAMED = re.compile(r"`(?:\.\./)*(paper_figs/[^`\s<>*{}]+\.[A-Za-z0-9]+)`")
+
+
+def _pages() -> list:
+    return [ROOT / "README.md"] + sorted((ROOT / "docs").rglob("*.md"))
+
+
+def paper_figs_targets(page: Path, text: str) -> list:
+    """(target as written, the repository path it shows) of every link, image and named file under paper_figs/
+    on a page. The README's links resolve from the repository root; a documentation page's from its place in the
+    site, where docs/hooks.py puts paper_figs/ at the site's root (``../paper_figs/x.png`` from docs/studies/)."""
+    import posixpath
+
+    out = []
+    for t in LINK.findall(text):
+        if "://" in t or "paper_figs/" not in t:
+            continue
+        if page == ROOT / "README.md":
+            out.append((t, posixpath.normpath(t)))
+        else:
+            here = page.parent.relative_to(ROOT / "docs").as_posix()
+            out.append((t, posixpath.normpath(posixpath.join(here, t))))
+    out += [(t, t) for t in NAMED.findall(text)]
+    return out
+
+
+def test_every_paper_figs_file_the_readme_and_docs_link_exists():
+    """Every figure, table or file under paper_figs/ that README.md or a page of docs/ links, shows or names
+    exists, and a documentation page's link reaches it from where the page stands in the site."""
+    found, missing = 0, []
+    for page in _pages():
+        for written, rel in paper_figs_targets(page, page.read_text(encoding="utf-8")):
+            found += 1
+            if not rel.startswith("paper_figs/") or not (ROOT / rel).is_file():
+                missing.append(f"{page.relative_to(ROOT)}: {written}")
+    assert found >= 10, found  # the pages show paper_figs/ figures: a pattern that finds none is broken
+    assert not missing, f"links to files that do not exist (rebuild with python -m study.figures?): {missing}"
+
+
+def test_the_paper_figs_link_check_can_fail():
+    docs = ROOT / "docs" / "studies" / "index.md"
+    text = ("![a](../paper_figs/grand/drift_vs_noise.png) [b](../../paper_figs/CLAIMS.md) "
+            "`paper_figs/nowhere.md` [c](https://example.org/paper_figs/x.png) `paper_figs/<study>/`")
+    got = paper_figs_targets(docs, text)
+    assert got == [("../paper_figs/grand/drift_vs_noise.png", "paper_figs/grand/drift_vs_noise.png"),
+                   ("../../paper_figs/CLAIMS.md", "../paper_figs/CLAIMS.md"),
+                   ("paper_figs/nowhere.md", "paper_figs/nowhere.md")]
+    assert not any(r.startswith("paper_figs/") and (ROOT / r).is_file() for _, r in got)
+    readme = paper_figs_targets(ROOT / "README.md", "![x](paper_figs/seed000_svr_mmg/drift_heatmap_none.png)")
+    assert readme == [("paper_figs/seed000_svr_mmg/drift_heatmap_none.png",
+                       "paper_figs/seed000_svr_mmg/drift_heatmap_none.png")]
 
 
 def _group_rows() -> dict:

@@ -50,6 +50,73 @@ def test_every_option_in_conf_has_its_own_colour_and_marker(group, styles):
         assert np.linalg.norm(_lab(styles[n][0]) - _lab("#000000")) >= MIN_DELTA_E, n
 
 
+def _de2000(lab1, lab2) -> float:
+    """CIEDE2000 colour difference (G. Sharma, W. Wu, E. N. Dalal, Color Res. Appl. 30, 21-30, 2005, eqs. 1-22)."""
+    (L1, a1, b1), (L2, a2, b2) = lab1, lab2
+    cb = (np.hypot(a1, b1) + np.hypot(a2, b2)) / 2
+    g = 0.5 * (1 - np.sqrt(cb ** 7 / (cb ** 7 + 25 ** 7)))
+    a1p, a2p = (1 + g) * a1, (1 + g) * a2
+    c1, c2 = np.hypot(a1p, b1), np.hypot(a2p, b2)
+    h1 = np.degrees(np.arctan2(b1, a1p)) % 360 if c1 else 0.0
+    h2 = np.degrees(np.arctan2(b2, a2p)) % 360 if c2 else 0.0
+    dh = 0.0 if c1 * c2 == 0 else (h2 - h1 + 180) % 360 - 180
+    dH = 2 * np.sqrt(c1 * c2) * np.sin(np.radians(dh / 2))
+    lb, cbp = (L1 + L2) / 2, (c1 + c2) / 2
+    if c1 * c2 == 0:
+        hb = h1 + h2
+    elif abs(h1 - h2) <= 180:
+        hb = (h1 + h2) / 2
+    else:
+        hb = (h1 + h2 + 360) / 2 if h1 + h2 < 360 else (h1 + h2 - 360) / 2
+    t = (1 - 0.17 * np.cos(np.radians(hb - 30)) + 0.24 * np.cos(np.radians(2 * hb))
+         + 0.32 * np.cos(np.radians(3 * hb + 6)) - 0.20 * np.cos(np.radians(4 * hb - 63)))
+    rt = -np.sin(np.radians(60 * np.exp(-((hb - 275) / 25) ** 2))) * 2 * np.sqrt(cbp ** 7 / (cbp ** 7 + 25 ** 7))
+    sl = 1 + 0.015 * (lb - 50) ** 2 / np.sqrt(20 + (lb - 50) ** 2)
+    sc, sh = 1 + 0.045 * cbp, 1 + 0.015 * cbp * t
+    dl, dc = (L2 - L1) / sl, (c2 - c1) / sc
+    return float(np.sqrt(dl ** 2 + dc ** 2 + (dH / sh) ** 2 + rt * dc * (dH / sh)))
+
+
+def test_ciede2000_matches_sharmas_test_data():
+    """Pairs 1, 2, 17, 25 and 34 of Sharma, Wu & Dalal's Table 1, to the 4 decimals published."""
+    for lab1, lab2, want in (((50, 2.6772, -79.7751), (50, 0, -82.7485), 2.0425),
+                             ((50, -1.3802, -84.2814), (50, 0, -82.7485), 1.0000),
+                             ((50, 2.5, 0), (73, 25, -18), 27.1492),
+                             ((60.2574, -34.0099, 36.2677), (60.4626, -34.1751, 39.4387), 1.2644),
+                             ((2.0776, 0.0795, -1.135), (0.9033, -0.0636, -0.5514), 0.9082)):
+        assert _de2000(lab1, lab2) == pytest.approx(want, abs=5e-5)
+
+
+#: any two estimators' colours at least this far apart in CIEDE2000, the perceptual difference (CIE76 overstates
+#: differences among saturated blues and purples: three dark purples passed MIN_DELTA_E and looked alike in a
+#: figure of eleven estimators); an assumption of this test
+MIN_DE2000 = 20.0
+#: every estimator's CIE lightness L* in this range: a line darker than 30 is hard to tell from the black truth and
+#: from other dark lines, one lighter than 72 fades on white
+LIGHTNESS = (30.0, 72.0)
+
+
+def test_every_estimator_colour_is_clearly_distinct():
+    names = sorted(f.stem for f in (REPO / "conf" / "estimator").glob("*.yaml"))
+    assert len(names) >= 11
+    close = [(a, b, round(_de2000(_lab(ESTIMATOR_STYLE[a][0]), _lab(ESTIMATOR_STYLE[b][0])), 1))
+             for a, b in itertools.combinations(names, 2)]
+    close = [c for c in close if c[2] < MIN_DE2000]
+    assert not close, f"estimator colours closer than CIEDE2000 {MIN_DE2000}: {close}"
+    for n in names:
+        lightness = _lab(ESTIMATOR_STYLE[n][0])[0]
+        assert LIGHTNESS[0] <= lightness <= LIGHTNESS[1], f"{n}: {ESTIMATOR_STYLE[n][0]} has L* {lightness:.0f}"
+
+
+def test_the_distinctness_check_can_fail():
+    """The palette the estimators had before (Tol's muted scheme): indigo, wine and purple pass CIE76 at 20 but not
+    CIEDE2000 at 20, and the indigo is too dark."""
+    wine, purple, indigo = _lab("#882255"), _lab("#AA4499"), _lab("#332288")
+    assert np.linalg.norm(wine - purple) >= MIN_DELTA_E
+    assert _de2000(wine, purple) < MIN_DE2000
+    assert indigo[0] < LIGHTNESS[0]
+
+
 def test_the_checker_finds_what_keeps_a_figure_from_print():
     plt = _plt()
     fig, ax = plt.subplots(figsize=(4, 3))
@@ -178,3 +245,26 @@ def test_emcee_figures_are_fit_for_print_and_the_band_is_visible(tmp_path):
     dev = [lim for lab, lim in b.axes["posterior_band_zigzag_35_35"] if lab.startswith("r - median")]
     width = 2e-3 * 0.75  # q95 - q05 of r in deg/s
     assert dev and dev[0][1] - dev[0][0] < 3 * width  # the band fills a third of its axes or more
+
+
+def test_signed_axis_is_chosen_from_the_data_with_plain_ticks():
+    """Values of either sign reaching hundreds: symmetric-log ticks at 0, +-1, +-10, +-100 written plainly (not
+    '-10^0' or '7.60718x10^-1'); small values of either sign: a linear axis; positive values: a log axis."""
+    from study.figures.style import signed_axis
+
+    plt = _plt()
+    fig, axes = plt.subplots(1, 3, figsize=(7, 2.5), layout="constrained")
+    cases = (([-312.0, -23.0, 0.4, 7.8, 150.0], "symlog"), ([-0.14, -0.01, 0.3, 0.76], "linear"),
+             ([0.9, 3.0, 80.0], "log"))
+    for ax, (y, want) in zip(axes, cases):
+        ax.plot(range(len(y)), y)
+        assert signed_axis(ax, y) == want
+        ax.set_xlabel("h/T [-]")
+        ax.set_ylabel("K' [-]")
+    fig.canvas.draw()
+    labels = [t.get_text() for t in axes[0].get_yticklabels() if t.get_text()]
+    assert labels == ["-100", "-10", "-1", "0", "1", "10", "100"], labels
+    for ax in axes[1:]:
+        assert all("10^" not in t.get_text() and "times" not in t.get_text() for t in ax.get_yticklabels())
+    assert readability_problems(fig) == []
+    plt.close(fig)

@@ -465,39 +465,63 @@ def lcurve_figure(b: Builder, study: str, entries: list, eq: str = "N"):
              "corner")
 
 
+#: the convergence figures' axis: estimate / truth, linear within +-CONV_LINEAR (a coefficient within its truth's
+#: size of the truth), logarithmic beyond, so no coefficient is cut off
+CONV_LINEAR = 2.0
+
+
 def convergence_figure(b: Builder, study: str, run, params, name: str, label: str, title: str | None = None):
-    """Every coefficient of an incremental LS-SVM run against the number of samples, over its truth. ``label``
-    describes the output (README), ``title`` (default: the run's set-up) heads the figure."""
+    """Every coefficient of an incremental LS-SVM run against the number of samples, over its truth, on a
+    symmetric-log axis (linear within +-2, logarithmic beyond: every coefficient shown, however far off). The
+    coefficients that end beyond twice their truth (on the logarithmic part) are named in the title and in the
+    caption with their final ratio. ``label`` describes the output (README), ``title`` (default: the run's
+    set-up) heads the figure."""
+    from .style import signed_axis
+
     plt = _plt()
     tru = params[params["run_id"] == run["run_id"]].set_index("name")["truth"]
     eqs = [e for e in ("X", "Y", "N") if b.artefact(run["run_id"], f"{e}/convergence.csv") is not None]
     if not eqs:
         return
-    fig, axes = plt.subplots(len(eqs), 1, figsize=(PRINT_WIDTH_IN, 2.0 * len(eqs) + 0.7), sharex=True,
+    fig, axes = plt.subplots(len(eqs), 1, figsize=(PRINT_WIDTH_IN, 2.3 * len(eqs) + 0.9), sharex=True,
                              squeeze=False, layout="constrained")
     markers = ["o", "s", "^", "v", "D", "<", ">", "P", "X"]
+    far = []  # (coefficient, final estimate / truth) beyond +-CONV_LINEAR at the last sample
     for ax, eq in zip(axes[:, 0], eqs):
         cv = b.artefact_csv(run["run_id"], f"{eq}/convergence.csv")
         by_truth = any(c in tru for c in cv.columns[1:])
         cols = [c for c in cv.columns[1:] if c != "intercept"]
         every = max(1, len(cv) // 10)
+        ys = [np.array([1.0])]
         for k, c in enumerate(cols):
             st = {"color": TOL_MUTED[k % len(TOL_MUTED)], "marker": markers[k % len(markers)], "markevery": every,
                   "ms": 4, "lw": 1.0}
             ref = tru.get(c) if by_truth else cv[c].iloc[-1]  # regression coefficients (Nomoto): / final value
             if ref is not None and np.isfinite(ref) and ref != 0:
-                ax.plot(cv.iloc[:, 0], cv[c] / ref, label=c, **st)
+                y = (cv[c] / ref).to_numpy(float)
+                last = y[np.isfinite(y)][-1] if np.isfinite(y).any() else np.nan
+                off = np.isfinite(last) and abs(last) > CONV_LINEAR
+                if off:
+                    far.append((c, last))
+                ax.plot(cv.iloc[:, 0], y, label=f"{c} (ends at {last:.3g})" if off else c, **st)
+                ys.append(y)
             elif c in tru:
-                ax.plot(cv.iloc[:, 0], cv[c], ls=":", label=f"{c} (truth 0: the estimate)", **st)
+                y = cv[c].to_numpy(float)
+                ax.plot(cv.iloc[:, 0], y, ls=":", label=f"{c} (truth 0: the estimate)", **st)
+                ys.append(y)
         ax.axhline(1.0, color="k", lw=0.8)
-        ax.set_ylim(-1, 3)
+        signed_axis(ax, np.concatenate(ys), linthresh=CONV_LINEAR, linear_below=3.0, linscale=1.5, inner=(1.0,),
+                    allow_log=False)
         ax.set_ylabel(f"{eq}: estimate / {'truth' if by_truth else 'final value'} [-]")
         ax.legend(loc="center left", bbox_to_anchor=(1.01, 0.5), ncol=1 if len(cols) <= 8 else 2)
     axes[-1, 0].set_xlabel("samples used [-]")
-    fig.suptitle(_wrap(f"Incremental LS-SVM: each coefficient against the samples used ({title or _run_setup(run)}; "
-                       "axis cut at -1 and 3)"))
+    note = (f"ending beyond {CONV_LINEAR:g} times the truth (estimate / truth at the last sample): "
+            + ", ".join(f"{c} {v:.3g}" for c, v in far) if far else
+            f"every coefficient ends within {CONV_LINEAR:g} times its truth")
+    fig.suptitle(_wrap(f"Incremental LS-SVM: each coefficient against the samples used ({title or _run_setup(run)}); "
+                       f"symmetric-log axis, linear within ±{CONV_LINEAR:g}; {note}"))
     b.figure(fig, study, name, f"convergence of every coefficient against the number of samples, incremental LS-SVM "
-             f"({label})")
+             f"({label}; {note})")
 
 
 def _run_setup(run) -> str:
@@ -544,6 +568,9 @@ def emcee_figures(b: Builder, study: str, run, params, maneuver: str = "zigzag_3
     band = b.artefact_csv(run["run_id"], f"validation/{maneuver}_band.csv")
     if band is not None:
         chans = [c for c in ("u", "v", "r", "psi") if f"q50_{c}" in band]
+        inside = {c: float(((band[f"q05_{c}"] <= band[f"truth_{c}"]) & (band[f"truth_{c}"] <= band[f"q95_{c}"])).mean())
+                  for c in chans}
+        verdict = band_coverage_note(run, params, inside)
         fig, axes = plt.subplots(2 * len(chans), 1, figsize=(PRINT_WIDTH_IN * 0.85, 2.6 * len(chans) + 1.0),
                                  sharex=True, squeeze=False, layout="constrained",
                                  gridspec_kw={"height_ratios": [1.6, 1.0] * len(chans)})
@@ -557,6 +584,7 @@ def emcee_figures(b: Builder, study: str, run, params, maneuver: str = "zigzag_3
             ax.plot(t, q50, color=OKABE_BLUE, lw=1.2, label="posterior median")
             ax.plot(t, truth, color="black", ls="--", lw=1.1, label="truth")
             ax.set_ylabel(f"{c} [{u}]")
+            ax.set_title(f"{c}: the truth inside the 90 % band at {100 * inside[c]:.0f} % of the samples", loc="left")
             dev.fill_between(t, q05 - q50, q95 - q50, **fill)
             dev.plot(t, truth - q50, color="black", ls="--", lw=1.1)
             dev.axhline(0.0, color=OKABE_BLUE, lw=1.0)
@@ -567,9 +595,31 @@ def emcee_figures(b: Builder, study: str, run, params, maneuver: str = "zigzag_3
         h, lab = axes[0, 0].get_legend_handles_labels()
         fig.legend(h, lab, loc="outside lower center", ncol=3)
         fig.suptitle(_wrap(f"{maneuver}: posterior-predictive band of emcee ({setup}; {int(band['draws'].iloc[0])} "
-                           "draws); below each channel: the band and the truth less the posterior median"))
+                           f"draws); below each channel: the band and the truth less the posterior median. {verdict}"))
         b.figure(fig, study, f"posterior_band_{maneuver}", f"posterior-predictive band of the {maneuver} (emcee, "
-                 f"{run['cfg_structure.name']})")
+                 f"{run['cfg_structure.name']}). {verdict}")
+
+
+def band_coverage_note(run, params, inside: dict) -> str:
+    """What a posterior-predictive figure's dataset shows, from its numbers: whether the run's 90 % parameter
+    intervals hold the truth (how many of how many, which miss) and the share of the plotted record at which the
+    truth lies inside the 90 % band, per channel (``inside``: channel -> share)."""
+    pr = params[params["run_id"] == run["run_id"]]
+    pr = pr[pr["ci_low"].notna() & pr["ci_high"].notna() & pr["truth"].notna()] if "ci_low" in pr else pr.iloc[:0]
+    hit = (pr["ci_low"] <= pr["truth"]) & (pr["truth"] <= pr["ci_high"])
+    missed = list(pr.loc[~hit, "name"])
+    band = ", ".join(f"{100 * v:.0f} % of the {c} samples" for c, v in inside.items())
+    short = [c for c, v in inside.items() if v < 0.9]
+    if not len(pr):
+        par = "No parameter intervals recorded"
+    elif missed:
+        par = (f"This dataset's 90 % intervals miss the truth for {len(missed)} of {len(pr)} parameters "
+               f"({', '.join(missed)})")
+    else:
+        par = f"This dataset's 90 % intervals hold the truth for all {len(pr)} parameters"
+    rec = (f"the 90 % band holds the truth at {band}" + (" (below 90 %: the band misses the truth over much of the "
+           "record)" if short else ""))
+    return f"{par}; {rec}."
 
 
 def _pct(x) -> str:

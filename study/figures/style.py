@@ -30,22 +30,25 @@ OKABE_ITO = ["#E69F00", "#56B4E9", "#009E73", "#F0E442", "#0072B2", "#D55E00", "
 #: posterior bands and truth lines of the emcee figures
 OKABE_BLUE = "#0072B2"
 
-#: estimator -> (colour, marker), the same in every figure. Tol's nine muted colours and three Okabe-Ito colours
-#: that stay apart from them (tested: tests/test_figure_style.py); each estimator also has its own marker, so
-#: two estimators differ even in greyscale. A new estimator (conf/estimator/<name>.yaml) needs its entry here
-#: (the test fails without it; until then it is drawn grey with a marker picked from its name).
+#: estimator -> (colour, marker), the same in every figure. Twelve colours drawn from matplotlib's tab10 and tab20,
+#: Okabe & Ito's set and Tol's muted and vibrant schemes, chosen so that any two are at least 20 apart in CIEDE2000
+#: (G. Sharma, W. Wu, E. N. Dalal, "The CIEDE2000 color-difference formula", Color Res. Appl. 30, 2005) and every
+#: one has a CIE lightness L* of 30-72: no near-black line beside the black truth, no pale line on white, and no
+#: two dark purples (tested: tests/test_figure_style.py). Each estimator also has its own marker, so two estimators
+#: differ even in greyscale. A new estimator (conf/estimator/<name>.yaml) needs its entry here (the test fails
+#: without it; until then it is drawn grey with a marker picked from its name).
 ESTIMATOR_STYLE = {
-    "ls": ("#332288", "o"),            # indigo
-    "ridge": ("#88CCEE", "s"),         # cyan
-    "lasso": ("#44AA99", "^"),         # teal
-    "lssvm": ("#117733", "v"),         # green
-    "tlssvm": ("#999933", "D"),        # olive
-    "lssvm_online": ("#DDCC77", "<"),  # sand
-    "svr_eps": ("#CC6677", ">"),       # rose
-    "svr_nu": ("#882255", "P"),        # wine
-    "sindy": ("#AA4499", "X"),         # purple
+    "ls": ("#1F77B4", "o"),            # tab10 blue
+    "ridge": ("#33BBEE", "s"),         # Tol vibrant cyan
+    "lasso": ("#44AA99", "^"),         # Tol muted teal
+    "lssvm": ("#117733", "v"),         # Tol muted green
+    "tlssvm": ("#999933", "D"),        # Tol muted olive
+    "lssvm_online": ("#C49C94", "<"),  # tab20 light brown
+    "svr_eps": ("#EE3377", ">"),       # Tol vibrant magenta
+    "svr_nu": ("#882255", "P"),        # Tol muted wine
+    "sindy": ("#9467BD", "X"),         # tab10 purple
     "de": ("#E69F00", "*"),            # Okabe-Ito orange
-    "emcee": ("#0072B2", "h"),         # Okabe-Ito blue
+    "emcee": ("#8C564B", "h"),         # tab10 brown
     "map": ("#D55E00", "p"),           # Okabe-Ito vermillion
 }
 
@@ -120,6 +123,42 @@ def log_ticks(ax, axis: str = "y") -> None:
         ax_.set_major_formatter(plain)
     ax_.set_minor_locator(LogLocator(base=10, subs=tuple(float(k) for k in range(2, 10)), numticks=12))
     ax_.set_minor_formatter(NullFormatter())
+
+
+def signed_axis(ax, values, axis: str = "y", linthresh: float = 1.0, linear_below: float = 5.0,
+                linscale: float = 1.0, inner: tuple = (), allow_log: bool = True) -> str:
+    """An axis chosen from the values it shows, with labelled ticks a reader can read: log (with :func:`log_ticks`)
+    when every value is positive (and ``allow_log``); linear when none exceeds ``linear_below`` in magnitude;
+    else symmetric-log, linear within +-``linthresh`` (stretched to ``linscale`` decades each side), with ticks at
+    0, +-``inner``, +-``linthresh`` and every power of ten beyond, written plainly (-100, -10, -1, 0, 1, 10, 100),
+    never matplotlib's default symlog labels. Call it after the last plot on the axes. Returns the scale chosen."""
+    from matplotlib.ticker import FixedLocator, FuncFormatter, MaxNLocator, NullLocator
+
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    ax_ = ax.yaxis if axis == "y" else ax.xaxis
+    set_scale = ax.set_yscale if axis == "y" else ax.set_xscale
+    plain = FuncFormatter(lambda x, _: f"{x:g}")
+    if allow_log and len(v) and (v > 0).all():
+        set_scale("log")
+        log_ticks(ax, axis)
+        return "log"
+    big = float(np.abs(v).max()) if len(v) else 0.0
+    if big <= linear_below:
+        ax_.set_major_locator(MaxNLocator(nbins=6))
+        ax_.set_major_formatter(plain)
+        return "linear"
+    set_scale("symlog", linthresh=linthresh, linscale=linscale)
+    lo, hi = ax.get_ylim() if axis == "y" else ax.get_xlim()
+    lo, hi = min(lo, hi), max(lo, hi)
+    top = max(abs(lo), abs(hi))
+    # the decades (10, 100, ...) beyond the threshold, and the threshold itself
+    decades = [10.0 ** e for e in range(math.ceil(math.log10(linthresh) + 1e-9), math.ceil(math.log10(top)) + 1)]
+    ticks = [0.0] + [sgn * t for t in {*inner, linthresh, *(d for d in decades if d > linthresh)} for sgn in (-1, 1)]
+    ax_.set_major_locator(FixedLocator(sorted(t for t in ticks if lo <= t <= hi)))
+    ax_.set_major_formatter(plain)
+    ax_.set_minor_locator(NullLocator())
+    return "symlog"
 
 
 def short_number(v: float, digits: int = 2) -> str:

@@ -12,9 +12,12 @@ from ..plots import (
     ESTIMATOR_ORDER, NOISE_ORDER, PRINT_WIDTH_IN, TRUTH_STYLE, _plt, _order, _wrap, Builder, _hT, _first, at_sampling,
     estimator_style, fit_time_figure, lcurve_figure, log_ticks, sampling_label,
 )
+from ..style import signed_axis
 from ..verdicts import explain, sensitivity, summary
 
 NAME = "seed001_shallow_water"
+#: how far apart the estimators stand at each h/T of the parameter figures (a fraction of the step between h/T)
+DODGE = 0.13
 SEED = "001"  # the seed paper whose claim it tests: a "not run" row in CLAIMS.md until it has run
 
 
@@ -51,6 +54,7 @@ def build(b: Builder, runs, params, claims):
         noises = _order(q["cfg_noise.name"], NOISE_ORDER)
         ests = _order(q["cfg_estimator.name"], ESTIMATOR_ORDER)
         styles = dict(zip(speeds, ("-", "--", ":")))
+        scales = set()
         fig, axes = plt.subplots(len(names), len(noises), figsize=(PRINT_WIDTH_IN, 2.1 * len(names) + 1.4),
                                  squeeze=False, sharex=True, layout="constrained")
         for j, nz in enumerate(noises):
@@ -61,32 +65,36 @@ def build(b: Builder, runs, params, claims):
                     d = q[(q["name"] == n) & (q["cfg_noise.name"] == nz) & (q["cfg_vessel.operation.U0"] == sp)]
                     tru = d.groupby("hT")["truth_nd"].first().reindex(order)
                     ax.plot(range(len(order)), tru.to_numpy(float), ls=ls_, **{**TRUTH_STYLE, "lw": 2.0})
-                    for e in ests:
+                    for k, e in enumerate(ests):
                         de = d[d["cfg_estimator.name"] == e].groupby("hT")["estimate_nd"].median().reindex(order)
-                        ax.plot(range(len(order)), de.to_numpy(float), ls=ls_, ms=4, lw=0.9, **estimator_style(e))
+                        # each estimator beside the others at each h/T (estimators that agree would hide each
+                        # other), half-transparent where lines cross
+                        x = np.arange(len(order)) + DODGE * (k - (len(ests) - 1) / 2)
+                        ax.plot(x, de.to_numpy(float), ls=ls_, ms=4, lw=0.9, alpha=0.85, mec="black", mew=0.3,
+                                **estimator_style(e))
                         for h in order:
                             rows.append({"model": model, "noise": nz, "U0": sp, "h/T": h, "parameter": n + "'",
                                          "estimator": e, "estimate": de.get(h), "truth": tru.get(h)})
                 ax.set_xticks(range(len(order)), order)
                 ax.set_title(f"{n}', noise {nz}")
-                # a log axis where every value is positive; symmetric-log where estimates change sign (the
-                # second-order model's K', T1', T3' reach hundreds, of either sign, at some depths)
+                # chosen from the values: log where every value is positive, linear where they change sign but
+                # stay small, else symmetric-log (linear within +-1) with ticks at 0, +-1, +-10, ... (the second-order
+                # model's K', T1', T3' reach hundreds, of either sign, at some depths)
                 y = np.concatenate([ln.get_ydata() for ln in ax.get_lines()]).astype(float)
-                if (y[np.isfinite(y)] > 0).all():
-                    ax.set_yscale("log")
-                    log_ticks(ax)
-                else:
-                    ax.set_yscale("symlog", linthresh=1.0)
-                ax.set_ylabel(f"{n}' [-]")
+                scale = signed_axis(ax, y)
+                scales.add(scale)
+                ax.set_ylabel(f"{n}' [-]" if scale != "symlog" else f"{n}' [-] (symlog)")
                 if i == len(names) - 1:
                     ax.set_xlabel("h/T [-]")
-        handles = ([Line2D([], [], ms=5, lw=0.9, label=e, **estimator_style(e)) for e in ests]
+        handles = ([Line2D([], [], ms=5, lw=0.9, mec="black", mew=0.3, label=e, **estimator_style(e)) for e in ests]
                    + [Line2D([], [], label="truth (derived)", **TRUTH_STYLE)]
                    + [Line2D([], [], color="grey", ls=styles[sp], label=f"U0 = {sp:g} m/s") for sp in speeds])
         fig.legend(handles=handles, loc="outside lower center", ncol=min(len(handles), 4))
         structs = ", ".join(sorted(q["cfg_structure.name"].unique()))
         fig.suptitle(_wrap(f"KCS, {model}: non-dimensional Nomoto parameters against h/T (median over {structs} "
-                           f"rows{at}; K' = K L/U0, T' = T U0/L)"))
+                           f"rows{at}; K' = K L/U0, T' = T U0/L; estimators side by side at each h/T"
+                           + ("; symlog: linear within ±1, logarithmic beyond" if "symlog" in scales else "")
+                           + ")"))
         b.figure(fig, s, f"KT_vs_hT_{model}", f"non-dimensional Nomoto parameters against h/T per estimator and "
                  f"speed ({model}; black: derived truth{at})")
     if rows:

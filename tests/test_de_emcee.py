@@ -191,3 +191,19 @@ def test_de_and_emcee_finish_with_a_count_of_diverged_candidates(diverging, name
     truth = pb.model.truth()[0]
     for j, n in enumerate(pb.model_names):
         assert abs(est.coef_[j] / truth[n] - 1) < 0.1, (n, est.coef_[j], truth[n])
+
+
+def test_emcees_progress_bar_ends_full_and_says_why_it_stopped(capsys):
+    """A chain that converges before its step budget ends its bar at 100 % with the reason, not at the fraction of
+    the budget it used (which read as an abort)."""
+    from study.identify.estimators.bayes import EmceeSampler
+
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(200, 2))
+    y = X @ np.array([1.0, -0.5]) + 0.1 * rng.normal(size=200)
+    est = EmceeSampler(max_steps=20000, target_ess=200, seed=0)
+    est.fit(X, y, progress=True)
+    err = capsys.readouterr().err
+    last = err.replace("\r", "\n").strip().splitlines()[-1]
+    assert est.diagnostics_["steps"] < 20000
+    assert "100%" in last and f"converged at {est.diagnostics_['steps']} steps" in last, last

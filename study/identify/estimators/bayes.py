@@ -243,6 +243,12 @@ class EmceeSampler(Estimator):
                 if ess >= self.target_ess and steps > self.min_tau_multiple * float(np.max(tau)):
                     converged = True
                     break
+            if bar is not None:  # the bar ends full, saying why the chain stopped where it did
+                bar.total = steps
+                bar.set_postfix_str(f"{'converged' if converged else 'step budget spent'} at {steps} steps "
+                                    f"(ess {ess:.0f} of {self.target_ess:g}, tau {np.max(tau):.0f})"
+                                    if np.isfinite(ess) else f"stopped at {steps} steps")
+                bar.refresh()
         finally:
             if bar is not None:
                 bar.close()

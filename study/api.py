@@ -18,6 +18,7 @@ verb                       what it wraps
 ``replay_record``          ``study.sim.replay``: open loop with a record's measured rudder and propeller
 ``diagnose_records``       ``study.doctor.run.run`` (what ``python -m study.diagnose`` calls)
 ``read_results``           the results store's parquet tables
+``read_posterior``         ``study.identify.posterior``: an emcee run's chains as ArviZ ``InferenceData``
 =========================  ============================================================================
 """
 from __future__ import annotations
@@ -25,7 +26,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 __all__ = ["Identified", "load_vessel", "load_records", "real_data_dir", "simulate_maneuver", "measure_record",
-           "identify_model", "predict", "replay_record", "diagnose_records", "read_results"]
+           "identify_model", "predict", "replay_record", "diagnose_records", "read_results",
+           "read_posterior"]
 
 
 def _vessel(vessel, effects=()):
@@ -514,3 +516,49 @@ def read_results(results_dir="results", table: str = "runs"):
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no {table} table (no run has finished in {results_dir})")
     return read_table(path)
+
+
+def read_posterior(results_dir, run_id: str):
+    """An emcee run's posterior as ArviZ ``InferenceData``: every equation's chain joined into one posterior
+    (``<equation>.<coefficient>``; walkers as chains, as ``arviz.from_emcee`` takes them), the log posterior in
+    ``sample_stats``, the run id in the attributes. ``arviz.summary(idata)`` gives r-hat and ESS;
+    ``idata.to_netcdf(path)`` writes it (``python -m study.results posterior <run id> --out file.nc`` does both).
+
+    Parameters
+    ----------
+    results_dir : str or path
+        The results folder (or a study's committed table folder, which keeps its runs' chains).
+    run_id : str
+        The run (``runs.parquet``'s ``run_id``).
+
+    Raises
+    ------
+    FileNotFoundError
+        The run saved no chain (not an emcee run, or its artefacts are not in this folder).
+
+    Examples
+    --------
+    An emcee run of the committed study ``emcee_kt`` (Nomoto K, T, alpha of the KT Mariner):
+
+    >>> import pathlib, warnings
+    >>> import study
+    >>> table = pathlib.Path(study.__file__).parents[1] / "paper_figs" / "emcee_kt" / "table"
+    >>> run = sorted(p.name for p in (table / "artefacts").iterdir() if (p / "chain.npz").exists())[0]
+    >>> with warnings.catch_warnings():
+    ...     warnings.simplefilter("ignore")
+    ...     idata = study.read_posterior(table, run)
+    >>> {"K", "T", "alpha"} <= set(idata.posterior.data_vars)
+    True
+    >>> idata.attrs["run_id"] == run
+    True
+    """
+    from pathlib import Path
+
+    from .identify.posterior import inference_data, run_chains
+
+    folder = Path(results_dir) / "artefacts" / str(run_id)
+    chains = run_chains(folder)
+    if not chains:
+        raise FileNotFoundError(f"{folder}: no chain.npz (run {run_id} is not an emcee run, or its artefacts are "
+                                f"not in {results_dir})")
+    return inference_data(chains, {"run_id": str(run_id)})

@@ -27,12 +27,40 @@ def _say(store: ResultStore, stream=None) -> None:
         print(f"study.results: {line}", file=stream or sys.stderr)
 
 
+def _posterior(store: ResultStore, run_id: str, out: str | None) -> int:
+    """An emcee run's chains as one ArviZ InferenceData: r-hat and ESS printed, the netCDF file written."""
+    from pathlib import Path
+
+    from .identify.posterior import diagnostics, inference_data, run_chains
+
+    chains = run_chains(store.artefact_dir(run_id))
+    if not chains:
+        print(f"study.results: error: {run_id}: no chain.npz in {store.artefact_dir(run_id)}; expected the run id of "
+              "an emcee run of this results folder", file=sys.stderr)
+        return 2
+    if out is not None and Path(out).suffix != ".nc":
+        print(f"study.results: error: --out {out}: expected a netCDF file name ending in .nc", file=sys.stderr)
+        return 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)  # ArviZ announces its coming refactor on import
+        idata = inference_data(chains, {"run_id": run_id, "results": str(store.root.resolve())})
+        table = diagnostics(idata)
+    print(f"{run_id}: {idata.posterior.sizes['chain']} walkers x {idata.posterior.sizes['draw']} saved draws, "
+          f"{len(table)} coefficients (ArviZ; walkers as chains: r-hat says whether the ensemble mixed)")
+    print(table.to_string(float_format=lambda x: f"{x:.4g}"))
+    if out is not None:
+        idata.to_netcdf(out)
+        print(f"written {Path(out).resolve()}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
-    """``python -m study.results {rebuild,show} [--root results]``; exit status 1 on an error."""
+    """``python -m study.results {rebuild,show,posterior} [--root results]``; exit status 1 on an error."""
     ap = argparse.ArgumentParser(prog="python -m study.results", description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     for name, help_ in (("rebuild", "rebuild runs.parquet and params.parquet from the records"),
-                        ("show", "counts by status and the last 10 runs")):
+                        ("show", "counts by status and the last 10 runs"),
+                        ("posterior", "an emcee run's posterior: ArviZ's r-hat and ESS, and a netCDF file")):
         p = sub.add_parser(name, help=help_)
         p.add_argument("--root", "--results", dest="root", default=None,
                        help="results folder (default $STUDY_RESULTS_DIR or results/)")
@@ -40,12 +68,17 @@ def main(argv: list[str] | None = None) -> int:
             p.add_argument("--allow-empty", action="store_true",
                            help="write empty tables even over non-empty ones (no well-formed record found)")
             p.add_argument("--strict", action="store_true", help="exit 1 when a record was skipped")
+        if name == "posterior":
+            p.add_argument("run_id", help="the run (runs.parquet's run_id)")
+            p.add_argument("--out", default=None, help="write the InferenceData to this netCDF file (.nc)")
     args = ap.parse_args(argv)
     store = ResultStore(args.root)
     if not store.root.is_dir():  # nothing to show or rebuild: refused, and no folder is made
         print(f"study.results: error: --root {args.root or store.root}: no such folder {store.root.resolve()}; "
               "expected a results folder (one a study wrote)", file=sys.stderr)
         return 2
+    if args.cmd == "posterior":
+        return _posterior(store, args.run_id, args.out)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # the same problems are printed from the report below
         try:

@@ -30,7 +30,7 @@ FORBIDDEN = {
 
 #: modules being rewritten elsewhere (the results store, the app, the pipeline, the commands' error handling):
 #: their docstrings are checked once they land; listed here so that nothing else can be left out silently
-NOT_YET = {"study/cli.py", "study/settings.py"}
+NOT_YET: set = set()
 
 
 def problems(text: str) -> list[str]:

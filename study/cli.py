@@ -117,7 +117,7 @@ def did_you_mean(exc: BaseException) -> str | None:
         while c is not None and node is None:
             node = getattr(c, "parent_node", None)
             c = c.__cause__ or c.__context__
-        names = [str(k) for k in node.keys()] if node is not None and hasattr(node, "keys") else []
+        names = [str(k) for k in node.keys() if str(k) != "hydra"] if node is not None and hasattr(node, "keys") else []
         leaf = key.rsplit(".", 1)[-1]
         close = difflib.get_close_matches(leaf, names, n=3, cutoff=0.6)
         where = key.rsplit(".", 1)[0] + "." if "." in key else ""

@@ -51,7 +51,7 @@ def _results_dir(cfg: DictConfig) -> Path:
 
 def precheck(overrides: list, multirun: bool) -> None:
     """Every check of ``python -m study``, on the configuration composed from the command line, before Hydra
-    makes its output folder (``outputs/...``, a sweep's ``multirun/...``) or anything else: the classes the
+    makes its output folder (``<results_dir>/logs/...``) or anything else: the classes the
     configuration names, in Hydra's own node too (callbacks, launcher, sweeper: the trusted-code boundary), the
     settings (``study.settings.check_run``: values, enumerated settings, settings that must fit together), the
     results folder writable, and a run's records read and checked against the vessel. A sweep's jobs are

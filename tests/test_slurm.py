@@ -210,7 +210,7 @@ def test_sweep_lands_every_record_once_and_records_a_failing_job(cluster, tmp_pa
     rc = _run_sweep(cmd, work, log, name)
     # the sweep ends with its count, and exit status 1 for the failed runs (study.app.sweep_finished)
     assert rc == 1 and "[study] sweep finished: 6 jobs, 2 failed, 4 ok" in log.read_text(errors="replace"), _tail(log)
-    assert list(work.glob("multirun/*/*/.submitit")), "the sweep did not go through submitit"
+    assert list(results.glob("logs/sweeps/*/*/.submitit")), "the sweep did not go through submitit"
 
     recs = _records(results)
     assert len(recs) == 6, f"{len(recs)} records: {sorted(recs)}\n{_tail(log)}"
@@ -226,7 +226,7 @@ def test_sweep_lands_every_record_once_and_records_a_failing_job(cluster, tmp_pa
             assert r["status"] == "ok", r.get("error")
             assert r["params"], f"{est} seed {seed}: no coefficients"
     # each job ran as one task of a SLURM job array (submitit names its folder <array id>_<index>): 4 + 2
-    job_dirs = [p.name for p in work.glob("multirun/*/*/.submitit/*_*") if re.fullmatch(r"\d+_\d+", p.name)]
+    job_dirs = [p.name for p in results.glob("logs/sweeps/*/*/.submitit/*_*") if re.fullmatch(r"\d+_\d+", p.name)]
     arrays = {}
     for d in job_dirs:
         arrays.setdefault(d.split("_")[0], []).append(d)
@@ -264,15 +264,17 @@ def test_cancelled_sweep_is_finished_by_the_same_command(cluster, tmp_path):
     assert {(r["config"]["estimator"]["name"], r["seed"]) for r in after.values()} == {
         (e, s) for e in ("ls", "lssvm") for s in range(4)}
     # the re-run's jobs said so, each in its own log (the app's line for a run found finished)
-    logs = "\n".join(p.read_text(errors="replace") for p in work.glob("multirun/*/*/.submitit/*/*_log.*"))
+    logs = "\n".join(p.read_text(errors="replace") for p in results.glob("logs/sweeps/*/*/.submitit/*/*_log.*"))
     assert logs.count("(already finished, resumed)") == len(before), logs[-3000:]
     _check_tables(results, after)
 
 
 # ------------------------------------------------------------------------------------------ grouped runs
-def _task_logs(work: Path) -> dict[str, str]:
-    """Each array task's output (submitit's <array>_<index>/<array>_<index>_0_log.out), by task."""
-    return {p.parent.name: p.read_text(errors="replace") for p in work.glob("multirun/*/*/.submitit/*_*/*_0_log.out")}
+def _task_logs(results: Path) -> dict[str, str]:
+    """Each array task's output (submitit's <array>_<index>/<array>_<index>_0_log.out, under the sweep's folder in
+    the results folder's logs), by task."""
+    return {p.parent.name: p.read_text(errors="replace")
+            for p in results.glob("logs/sweeps/*/*/.submitit/*_*/*_0_log.out")}
 
 
 def test_grouped_sweep_lands_every_record_once_and_records_a_failing_job(cluster, tmp_path):
@@ -298,7 +300,7 @@ def test_grouped_sweep_lands_every_record_once_and_records_a_failing_job(cluster
         else:
             assert r["status"] == "ok" and r["params"], r.get("error")
     # one array of two tasks, each of which ran three jobs (its [study] job lines)
-    logs = _task_logs(work)
+    logs = _task_logs(results)
     assert len(logs) == 2 and len({t.split("_")[0] for t in logs}) == 1, sorted(logs)
     assert sorted(t.count("[study] job ") for t in logs.values()) == [3, 3], logs
     jobs = sorted(int(m) for t in logs.values() for m in re.findall(r"\[study\] job (\d+)/6", t))
@@ -322,7 +324,7 @@ def test_grouped_cancelled_sweep_is_finished_by_the_same_command(cluster, tmp_pa
     before = _records(results)
     assert 2 <= len(before) < n_runs, f"the cancel did not land half way: {len(before)} of {n_runs} records"
     assert all(r.get("status") == "ok" for r in before.values()), before
-    first_logs = set(_task_logs(work))
+    first_logs = set(_task_logs(results))
 
     rc = _run_sweep(cmd, work, log, name)
     assert rc == 0, _tail(log)
@@ -330,7 +332,7 @@ def test_grouped_cancelled_sweep_is_finished_by_the_same_command(cluster, tmp_pa
     assert len(after) == n_runs and all(r["status"] == "ok" for r in after.values()), sorted(after)
     for p, r in before.items():
         assert after[p] == r, f"{p} was rewritten by the re-run"
-    logs = {k: v for k, v in _task_logs(work).items() if k not in first_logs}
+    logs = {k: v for k, v in _task_logs(results).items() if k not in first_logs}
     assert len(logs) == 4 and sorted(t.count("[study] job ") for t in logs.values()) == [2, 2, 2, 2], sorted(logs)
     assert "".join(logs.values()).count("(already finished, resumed)") == len(before)
     _check_tables(results, after)

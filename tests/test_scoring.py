@@ -74,9 +74,11 @@ def test_both_sampling_settings_is_an_error_naming_them(tmp_path):
     p = subprocess.run([sys.executable, "-m", "study", "experiment=tiny", "progress=false", "noise.sample_dt=0.5",
                         "noise.sample_dt_LU=0.01"], cwd=tmp_path,
                        env=dict(os.environ, STUDY_RESULTS_DIR=str(res)), capture_output=True, text=True, timeout=600)
-    runs = pd.read_parquet(res / "runs.parquet")
-    assert runs["status"].iloc[0] == "failed"
-    assert "noise.sample_dt=0.5 and noise.sample_dt_LU=0.01: give one of them" in runs["error"].iloc[0]
+    # refused before any work, in one line, nothing written (the settings are checked against each other first)
+    assert p.returncode == 2 and not res.exists() and not any(tmp_path.iterdir())
+    lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
+    assert lines == ["study: error: noise.sample_dt=0.5 and noise.sample_dt_LU=0.01: expected one of them (the other "
+                     "null)"], p.stderr
 
 
 def test_a_second_order_model_of_a_first_order_truth_is_degenerate_not_exact():

@@ -198,7 +198,9 @@ def generic_figures(b: Builder, runs, params, named: set, results: Path) -> None
         return
     study = runs["cfg_study"] if "cfg_study" in runs else pd.Series([None] * len(runs), index=runs.index)
     free = runs[~study.isin(named)]
-    for label, group in free.groupby(study[free.index].fillna(f"sweep_{results.resolve().name}"), dropna=False):
+    label_of = study[free.index].astype(object)
+    label_of = label_of.where(label_of.notna(), f"sweep_{results.resolve().name}")
+    for label, group in free.groupby(label_of, dropna=False):
         r, p = prepare_tables(group, params[params["run_id"].isin(group["run_id"])])
         for line in generic.build(b, r, p, str(label)):
             print(f"study.figures: {line}")

@@ -29,7 +29,9 @@ def varied(runs: pd.DataFrame) -> list:
 
 def _by_estimator_and_structure(b: Builder, runs: pd.DataFrame, name: str, metric: str, label: str, out: str,
                                 what: str) -> bool:
-    r = runs[runs[metric].notna()] if metric in runs else runs.iloc[0:0]
+    if metric not in runs:
+        return False
+    r = runs[runs[metric].notna()]
     r = r[np.isfinite(r[metric].astype(float))]
     if not len(r):
         return False

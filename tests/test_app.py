@@ -59,6 +59,7 @@ def _records(results):
     return {p.stem: json.loads(p.read_text()) for p in (results / "records").glob("*.json")}
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_two_process_sweep_resume_and_failure(tmp_path):
     results = tmp_path / "results"
     sweep = ["-m", "hydra/launcher=local", "hydra.launcher.n_jobs=2", "experiment=tiny", "noise=none,low",

@@ -25,6 +25,7 @@ def kt1():
     return v, make_model("nomoto1_nl", v)
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_de_recovers_the_nonlinear_kt_parameters_by_output_error(kt1):
     """Seed 004's set-up on an exact KT truth: two zigzags identified at once ('parallel processing') from the
     heading and yaw rate, 1 % output noise; DE with no initial values (box bounds only)."""
@@ -78,6 +79,7 @@ def _coverage_regression(n_rep=60, k=5, n=400, level=0.9):
     return hits
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_emcee_regression_intervals_are_calibrated():
     hits = _coverage_regression()
     n = hits.size

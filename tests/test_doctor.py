@@ -114,6 +114,7 @@ def test_no_hidden_effect_no_missing_effect():
     assert len(rep["ladder"]) == 1 and "No significant missing effect" in rep["verdict"]
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_two_hidden_effects_are_found_one_after_the_other():
     d, rep = diagnose("two")
     steps = [s["step"] for s in rep["ladder"]]
@@ -125,6 +126,7 @@ def test_two_hidden_effects_are_found_one_after_the_other():
     assert p["yaw_bias_N"] == pytest.approx(5e-4, rel=0.3)
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_too_little_excitation_is_said():
     """Straight runs only (the rudder at zero): the report says the excitation is too little, and a ranking
     made from such data is flagged as weak evidence rather than stated plainly."""
@@ -199,6 +201,7 @@ def test_the_doctor_reads_a_comma_separated_list_of_patterns(tmp_path):
         load_records(f"{tmp_path}/a/*.csv,{tmp_path}/nothing_here/*.csv")
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_cli_on_simulated_files_names_the_hidden_current(tmp_path):
     """The README's example: records made by python -m study.simulate with a hidden current; the doctor names
     it, writes report.html/json and its figures, logs its ladder in the results table, and keeps an existing
@@ -237,6 +240,7 @@ def test_cli_on_simulated_files_names_the_hidden_current(tmp_path):
 
 
 
+@pytest.mark.slow  # the slow tier: a real browser (Chromium), installed by .ci/run
 def test_a_real_report_renders_in_chromium(browser, tmp_path):
     """The doctor's own report (the hidden-current case), opened in headless Chromium: every figure decodes
     and is shown, the ranking has one row per candidate with the current first."""

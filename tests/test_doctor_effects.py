@@ -55,6 +55,7 @@ CASES = [pytest.param(e, ident, id=f"{e}-{'identified_hull' if ident else 'known
          for e in EFFECTS for ident in (False, True)]
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 @pytest.mark.parametrize("effect, identified", CASES)
 def test_hidden_effect_is_found_first_halves_the_error_and_is_identified(effect, identified):
     example = effect_config(effect)["example"]
@@ -86,6 +87,7 @@ def test_a_validation_record_at_a_new_depth_is_predicted_at_its_own_depth(identi
     assert h["train_1_zigzag_20_20"] == pytest.approx(1.8, rel=1e-6)
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_identified_hull_nothing_hidden_gives_no_effect():
     d, rep, _ = run_case("none", {}, True)
     assert rep["missing_effect"] is None and not rep["ambiguous"], rep["verdict"]
@@ -127,6 +129,7 @@ def test_a_users_own_effect_from_outside_the_package(monkeypatch):
     sys.modules.pop("n2_yaw", None)
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 @pytest.mark.parametrize("vessel,model", [("mariner", "abkowitz"), ("usv_waterjet", "usv_full"), ("auv", "auv")])
 def test_every_force_model_kind_is_diagnosed(vessel, model):
     """The doctor with the other force models, identified and anchored to the vessel config: a hidden current

@@ -582,6 +582,7 @@ def test_figures_fit_the_page():
 
 # --------------------------------------------------------------------------------------------- in Chromium
 
+@pytest.mark.slow  # the slow tier: a real browser (Chromium), installed by .ci/run
 def test_figures_and_ranking_render_in_chromium(browser, figures, tmp_path):
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait

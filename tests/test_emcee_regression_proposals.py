@@ -42,6 +42,7 @@ def _snooker_sd(move, seed=0, k=6, steps=3000):
     return float(np.mean(s.get_chain(discard=500).reshape(-1, k).std(axis=0)))
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_snooker_move_samples_the_target():
     """The corrected snooker move alone keeps a standard normal's sd (to 3 %; measured 1.00); emcee's own
     ``DESnookerMove`` shrinks it to about 0.82 (when this part fails, emcee has fixed its move)."""
@@ -141,6 +142,7 @@ def kvlcc2():
                          sim={"duration_scale": 0.5})
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 @pytest.mark.parametrize("case", ["kt", "kvlcc2"])
 def test_regression_chain_samples_the_closed_form_posterior(case, request):
     """The 'regression' likelihood (the rows' noise modelled) on central rows: new chain against the closed form
@@ -192,6 +194,7 @@ def test_informative_prior_chain_samples_the_map_posterior(kvlcc2):
         _against_de(new, old, sd, f"prior {eq}")
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_closed_form_chains_report_an_honest_ess():
     """100 chains (seeds) on one strongly correlated 6-coefficient posterior (two nearly collinear columns): the
     squared error of a chain's mean, in posterior sd, times the ESS the chain reports, averages 1 when that ESS is

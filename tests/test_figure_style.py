@@ -182,6 +182,7 @@ class _Keep(Builder):
         super().figure(fig, study, name, what)
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_grand_figures_are_fit_for_print_and_keep_each_estimators_colour(tmp_path):
     from study.figures.studies import grand
 

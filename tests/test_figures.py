@@ -31,6 +31,7 @@ def smoke(tmp_path_factory):
     return root, results, p
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_smoke_study_runs_everything(smoke):
     root, results, p = smoke
     runs = pd.read_parquet(results / "runs.parquet")
@@ -57,6 +58,7 @@ def figs(smoke, tmp_path_factory):
     return out
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_figures_rebuild_byte_stable(smoke, figs, tmp_path):
     root, results, _ = smoke
     outs = [figs]
@@ -94,6 +96,7 @@ def _snapshot(root: Path) -> dict:
     return {str(f.relative_to(root)): f.read_bytes() for f in root.rglob("*") if f.is_file()}
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_rebuilding_one_study_leaves_every_other_study_untouched(smoke, tmp_path):
     """The committed paper_figs/ rebuilt from a table that holds only the smoke study: every file of every other
     study is byte-identical, their CLAIMS.md and README.md rows stay, the smoke study's stale files go."""
@@ -185,6 +188,7 @@ def _from_committed_tables(out: Path, tmp_path: Path) -> str:
     return p.stdout
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_a_study_rebuilds_byte_identically_from_its_own_committed_table(smoke, figs, tmp_path):
     """Each rebuilt study keeps its table (finished runs, parameters, the artefacts its figures read) in
     <out>/<study>/table/; with no results folder, `python -m study.figures` rebuilds from those tables alone, to
@@ -203,6 +207,7 @@ def test_a_study_rebuilds_byte_identically_from_its_own_committed_table(smoke, f
     assert _snapshot(a) == _snapshot(b)
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_the_committed_paper_figs_rebuild_from_their_tables_to_the_same_bytes(tmp_path):
     """What a fresh clone does: `python -m study.figures` with no results folder rebuilds every study whose table
     is committed, and every file of paper_figs/ comes out as committed (git status stays clean)."""

@@ -83,6 +83,7 @@ def _shared_sample(jobs, composer, n_keys=3, n_more=6):
     return sorted(first, key=lambda j: keys.index(composer.group_key(j))) + list(jobs[step // 2::step])[:n_more]
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 @pytest.mark.parametrize("experiment", ["grand", "seed001_shallow_water", "smoke"])
 def test_composition_equals_hydras_on_a_sample(experiment):
     n, shared, loads = _compare(experiment, _shared_sample)
@@ -296,6 +297,7 @@ def _numbers(results: Path) -> dict:
     return out
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_the_study_gives_the_same_records_with_either_launcher(tmp_path):
     """Eight jobs (two estimators, two structures, two seeds: the seeds share their composition) with Hydra's
     joblib launcher and with the project's: the same run ids, the same numbers, the same artefacts; and each job

@@ -23,6 +23,7 @@ def test_there_are_notebooks():
 
 @pytest.mark.parametrize("path", [pytest.param(p, marks=pytest.mark.slow) if p.name in SLOW else p for p in NOTEBOOKS],
                          ids=lambda p: p.name)
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_notebook_runs(path, monkeypatch):
     nbformat = pytest.importorskip("nbformat", reason="nbformat is not installed (pip install -e '.[test]')")
     nbclient = pytest.importorskip("nbclient", reason="nbclient is not installed (pip install -e '.[test]')")

@@ -219,6 +219,7 @@ def test_simulated_records_pass_at_every_noise(vessel, maneuver):
             validate(df, f"{vessel}_{maneuver}_{noise}")
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_swapped_positions_are_refused_with_measured_or_estimated_states(tmp_path, good):
     """x0 and y0 swapped mirror the track: its course turns against the heading. Judged from positions and heading
     alone, so the record is refused too when u, v, r are to be estimated from them (states=ekf)."""

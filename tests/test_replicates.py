@@ -219,6 +219,7 @@ def test_the_command_refuses_a_bad_number_of_replicates_before_any_work(tmp_path
     assert not (tmp_path / "results").exists()
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_the_command_lands_replicates_and_resumes_after_a_kill(tmp_path):
     """``python -m study replicates=N``: killed (SIGKILL) once some replicates have landed, then run again with
     a larger N: every replicate once, none computed twice after it landed."""

@@ -772,6 +772,7 @@ def _overlapping_sweep(root, who, wait, barrier, out):
     _exit_child(out)
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 @pytest.mark.parametrize("wait", [True, False], ids=["wait", "skip"])
 def test_overlapping_sweeps_compute_each_run_once(tmp_path, wait):
     ctx = mp.get_context("spawn")
@@ -805,6 +806,7 @@ def test_overlapping_sweeps_compute_each_run_once(tmp_path, wait):
     assert not list((root / "records" / ".claims").glob("*.json"))  # every claim released
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_app_recomputes_a_run_after_its_estimator_changed(tmp_path):
     """The issue's case end to end, on a copy of the code: after an edit of another estimator the run is
     resumed; after an edit of its own estimator it is computed again, and the table says the old row is gone."""

@@ -31,7 +31,7 @@ import pytest
 
 import study
 
-pytestmark = pytest.mark.slurm
+pytestmark = [pytest.mark.slurm, pytest.mark.slow]  # the slow tier: a SLURM cluster, started by .ci/run
 
 CLUSTER_NAME = "study"  # scripts/slurm_cluster.sh
 UP_STATES = {"idle", "mix", "mixed", "alloc", "allocated", "comp", "completing"}

@@ -95,6 +95,7 @@ def _check_against_importance_sampling(problem, target_ess):
     return est, dz, ratio
 
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_laplace_moves_sample_the_kt_posterior(kt_problem):
     """Chain (ESS >= 300) against importance sampling: means within 0.4 sd, sds within 20 %."""
     est, dz, ratio = _check_against_importance_sampling(kt_problem, 300)

@@ -327,6 +327,7 @@ def test_study_run_with_rts_structure(tmp_path):
 
 # ------------------------------------------------------------------------------------------- the doctor
 
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_doctor_gives_the_same_verdict_with_estimated_states(tmp_path):
     """A hidden current (the effect's own example: 12 % of the speed towards 200 deg) on the 7 m KVLCC2: the
     doctor (known model; candidates current, wind, yaw bias) on records with measured u, v, r (1 % noise on

@@ -299,7 +299,7 @@ def collinearity_tables(b: Builder, runs, study: str, group=("cfg_model.name", "
                              "corr_max": d[f"m_corr_max_{e}"].median()})
     df = pd.DataFrame(rows)
     if len(df):
-        b.table(df, study, "condition_numbers", "condition numbers of the correlation matrix (seed 000 Table 3) and "
+        b.table(df, study, "condition_numbers", "condition numbers of the correlation matrix (Song et al. 2025 Table 3) and "
                 "of the column-scaled regressors, largest VIF and correlation, per equation (medians over runs)")
     return df
 
@@ -339,7 +339,7 @@ def correlation_figure(b: Builder, runs, study: str, run: pd.Series, label: str)
     fig.colorbar(im, ax=axes[0].tolist(), shrink=0.8, label="correlation coefficient [-]")
     fig.suptitle(_wrap(f"Regressor correlation matrices ({label})" + ("" if written else
                                                                       "; numbers in the run's collinearity.json")))
-    b.figure(fig, study, "correlation_matrices", f"regressor correlation matrices per equation ({label}; seed 000 "
+    b.figure(fig, study, "correlation_matrices", f"regressor correlation matrices per equation ({label}; Song et al. 2025 "
                                                  "Fig. 6)")
 
 
@@ -419,7 +419,7 @@ def rmse_cc_table(b: Builder, runs, study: str, group, maneuvers, channels=("u",
     df = pd.DataFrame(rows)
     if len(df):
         b.table(df, study, "rmse_cc", "RMSE and correlation coefficient of the predicted motions on the validation "
-                "manoeuvres (seed 000 Table 4; medians over runs)")
+                "manoeuvres (Song et al. 2025 Table 4; medians over runs)")
     return df
 
 
@@ -461,7 +461,7 @@ def lcurve_figure(b: Builder, study: str, entries: list, eq: str = "N"):
     ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.22))
     ax.set_title(_wrap(f"Truncated LS-SVM, {eq} equation: L-curve (numbers: rank kept; ringed: the corner chosen)",
                        60))
-    b.figure(fig, study, "lcurve", "the L-curve of the truncated LS-SVM (seed 001 Sec. 3) and the rank chosen at its "
+    b.figure(fig, study, "lcurve", "the L-curve of the truncated LS-SVM (Xu & Guedes Soares Sec. 3) and the rank chosen at its "
              "corner")
 
 

@@ -300,8 +300,8 @@ class Structure:
     split: dict = field(default_factory=dict)
     smoothing: dict = field(default_factory=dict)
     output_error: dict = field(default_factory=dict)
-    select: dict = field(default_factory=dict)  # {n_rows: k}: k evenly spaced training rows (seed 003: 100)
-    rate_from_heading: bool = False  # r replaced by the central difference of psi (seed 004 eq. 14)
+    select: dict = field(default_factory=dict)  # {n_rows: k}: k evenly spaced training rows (Du et al. 2016: 100)
+    rate_from_heading: bool = False  # r replaced by the central difference of psi (Zheng & Xiao 2017 eq. 14)
     source: str = ""
     _rts_cache: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -489,7 +489,7 @@ class Structure:
             report["rows_duplicate"] = int((dup & keep).sum())
             keep &= ~dup
         if c.get("min_abs") is not None:
-            # seed 000 eq. 8, |z_i| >= Lambda, read as a threshold on the target relative to its spread
+            # Song et al. 2025 eq. 8, |z_i| >= Lambda, read as a threshold on the target relative to its spread
             small = np.abs(y) < float(c["min_abs"]) * np.std(y[keep])
             report["rows_small"] = int((small & keep).sum())
             keep &= ~small
@@ -507,7 +507,7 @@ class Structure:
         Pt, yt, Pv, yv = Phi[~test], y[~test], Phi[test], y[test]
         rows = rows[np.nonzero(~test)[0]]
         n_sel = (self.select or {}).get("n_rows")
-        if n_sel and int(n_sel) < len(yt):  # seed 003 Sec. 3.3: 100 equally spaced pairs of the 600
+        if n_sel and int(n_sel) < len(yt):  # Du et al. 2016 Sec. 3.3: 100 equally spaced pairs of the 600
             idx = np.unique(np.round(np.linspace(0, len(yt) - 1, int(n_sel))).astype(int))
             Pt, yt, rows = Pt[idx], yt[idx], rows[idx]
             report["rows_selected"] = int(len(idx))

@@ -121,7 +121,7 @@ def pack(vessel: dict) -> np.ndarray:
     d = float(p["d"])
     if abs(float(p.get("xG", 0.0))) > 1e-12:
         raise ValueError(f"vessel '{vessel.get('name')}': the waterjet kind's origin is the centre of gravity "
-                         "(seed 000 eq. 1); particulars.xG must be 0")
+                         "(Song et al. 2025 eq. 1); particulars.xG must be 0")
     h = vessel["hull"]
     wj = vessel["waterjet"]
     q_m = 0.5 * rho * L * L * d

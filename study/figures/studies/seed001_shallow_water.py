@@ -178,7 +178,7 @@ def claim(b: Builder, r, p) -> list:
         t = pd.concat(tabs, ignore_index=True)
         t = t[["model", "against", "what", "verdict", "pairs", "wins", "losses", "ties", "p", "p_reverse",
                "median_ratio"]].rename(columns={"what": "choice"})
-        b.table(t, NAME, "claim_sensitivity", "seed 001: the truncated LS-SVM against each estimator, per model, on "
+        b.table(t, NAME, "claim_sensitivity", "Xu & Guedes Soares: the truncated LS-SVM against each estimator, per model, on "
                 "the exact KT truths with noise, paired per coefficient (ties: within 5 % or both below 1 %)",
                 floatfmt=".3g")
         verdicts = {k: v for k, (v, _) in per.items()}

@@ -35,8 +35,8 @@ def build(b: Builder, runs, params, claims):
             run = _first(r, **{"cfg_estimator.name": "lssvm_online", "cfg_structure.name": st, "cfg_noise.name": nz})
             if run is not None:
                 convergence_figure(b, s, run, p, f"online_convergence_{st}_{nz}", f"{st} samples, noise {nz}{at}; "
-                                   "seed 003 Figs. 3-8", title=f"auv, {st} samples, noise {nz}, {sub}, the seed's "
-                                   "interval scaled to this AUV; seed 003 Figs. 3-8")
+                                   "Du et al. 2016 Figs. 3-8", title=f"auv, {st} samples, noise {nz}, {sub}, the seed's "
+                                   "interval scaled to this AUV; Du et al. 2016 Figs. 3-8")
     # difference (central) against integral
     d = p[p["truth_kind"] == "exact"]
     tab = d.pivot_table(index=["cfg_estimator.name", "cfg_noise.name"], columns="cfg_structure.name",
@@ -110,7 +110,7 @@ def claim(b: Builder, r, p) -> list:
         return []
     t = pd.DataFrame(rows).sort_values(["criterion", "structure", "sample_dt_LU", "noise"], ascending=[False, True,
                                                                                                   False, True])
-    b.table(t, NAME, "claim_settling", f"seed 003: samples after which each coefficient stays settled (median, "
+    b.table(t, NAME, "claim_settling", f"Du et al. 2016: samples after which each coefficient stays settled (median, "
             f"largest, never) per run; truth band: within {REL_BAND:.0%} of the truth or an error below "
             f"{SCALED_BAND:.0%} of its equation; the seed: 'about 20' (counted as at most {SEED_SAMPLES})",
             floatfmt=".3g")

@@ -65,9 +65,9 @@ def build(b: Builder, runs, params, claims):
                 if idx[0] > 0:
                     ax.axvline(idx[0] - 0.3, color="grey", lw=0.8)
         axes[0, 0].legend(title="sample structure", loc="upper left", bbox_to_anchor=(1.01, 1.0))
-        fig.suptitle(_wrap("Seed 004: the KT parameters by DE, output error on the heading against central "
+        fig.suptitle(_wrap("Zheng & Xiao 2017: the KT parameters by DE, output error on the heading against central "
                            f"differences of it ({sub})"))
-        b.figure(fig, s, "difference_vs_integral", "seed 004: KT parameters by DE, output error against central "
+        b.figure(fig, s, "difference_vs_integral", "Zheng & Xiao 2017: KT parameters by DE, output error against central "
                  f"differences, per vessel, records (x1/x2) and noise{at}")
     ent = []
     rf = finest(r)[0]
@@ -76,7 +76,7 @@ def build(b: Builder, runs, params, claims):
                            "cfg_maneuvers.name": "seed004", "cfg_noise.name": "low"})
         if run is not None:
             ent.append((f"DE, {st}", run["run_id"], structure_style(st)))
-    validation_figure(b, s, ent, "zigzag_35_35", "validation_zigzag_35_35", "seed 004 Fig. 3: the 35/35 zigzag of the "
+    validation_figure(b, s, ent, "zigzag_35_35", "validation_zigzag_35_35", "Zheng & Xiao 2017 Fig. 3: the 35/35 zigzag of the "
                       f"Abkowitz Mariner predicted by nonlinear KT models identified by DE{at}",
                       setup=f"Abkowitz Mariner, nomoto1_nl, 2 records, noise low, {sampling_label(rf)}")
     fit_time_figure(b, r, s)
@@ -122,7 +122,7 @@ def claim(b: Builder, r, p) -> list:
         t = pd.concat(rows, ignore_index=True)
         t = t[["claim", "model", "what", "verdict", "pairs", "wins", "losses", "ties", "p", "p_reverse",
                "p_wilcoxon", "median_ratio"]].rename(columns={"what": "choice"})
-        b.table(t, NAME, "claim_sensitivity", "seed 004: each claim per model order on the exact KT truths, paired "
+        b.table(t, NAME, "claim_sensitivity", "Zheng & Xiao 2017: each claim per model order on the exact KT truths, paired "
                 "per coefficient (ties: within 5 % or both below 1 %), under each choice", floatfmt=".3g")
     for key, text, res in (("a", "integral (output error) samples identify the nonlinear KT parameters better than "
                             "central differences of the heading", per_model),

@@ -14,7 +14,7 @@ from .base import Effect
 class HullNonlinear(Effect):
     physics = "higher-order hull terms the model lacks or has wrong"
     enters = "extra free coefficients in the regression (the kind's own equations)"
-    source = "Yasukawa & Yoshimura (2015) eqs. 9-11; Abkowitz (1964); seed 000 eq. 2; seed 003 eq. 3"
+    source = "Yasukawa & Yoshimura (2015) eqs. 9-11; Abkowitz (1964); Song et al. 2025 eq. 2; Du et al. 2016 eq. 3"
 
     def __init__(self, name, params=None, terms=None):
         super().__init__(name, params)

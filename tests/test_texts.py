@@ -121,3 +121,22 @@ def test_the_commands_help():
         if c[0] in ("study", "study.simulate", "study.diagnose"):  # Hydra's help template, conf/hydra/help/
             assert "Example" in out and "Usage: python -m" in out, f"python -m {' '.join(c)}: no usage or example"
     assert not found, "\n".join(found)
+
+
+def _reports() -> list[Path]:
+    figs = REPO / "paper_figs"
+    return (sorted(figs.rglob("*.md")) + sorted(figs.glob("*/index.json"))
+            + sorted(figs.glob("doctor/*/report.json")))
+
+
+@pytest.mark.parametrize("path", _reports(), ids=lambda p: str(p.relative_to(REPO)))
+def test_reports(path):
+    """The committed reports and figure indexes (captions, claims, the doctor's reports): a report's provenance
+    (its git revision, on purpose) is left out of the check."""
+    text = path.read_text(encoding="utf-8")
+    if path.name == "report.json":
+        rep = json.loads(text)
+        rep.pop("provenance", None)
+        text = json.dumps(rep)
+    found = problems(text)
+    assert not found, f"{path.relative_to(REPO)}:\n" + "\n".join(found[:10])

@@ -110,6 +110,7 @@ def test_emcee_records_its_diagnostics_and_chain():
     assert z["chain"].ndim == 3 and list(z["names"]) == ["x0", "x1", "x2", "log_sigma"]
 
 
+@pytest.mark.long  # minutes of many datasets: run by hand (python -m pytest -m long)
 @pytest.mark.slow
 def test_emcee_output_error_intervals_are_calibrated(kt1):
     """Output-error likelihood with its assumptions exact: an exact KT model, white noise on the outputs only

@@ -176,6 +176,7 @@ def test_emcee_samples_the_closed_form_posterior(kt):
                 p, r)
 
 
+@pytest.mark.long  # minutes of many datasets: run by hand (python -m pytest -m long)
 @pytest.mark.slow
 def test_regression_intervals_are_calibrated_per_structure(kt, kt_1s):
     """The statistical test: 60 noisy datasets per regression structure and sampling interval; 90 % intervals must

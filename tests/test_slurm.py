@@ -200,13 +200,13 @@ def _check_tables(results: Path, records: dict[str, dict]) -> pd.DataFrame:
 
 
 def test_sweep_lands_every_record_once_and_records_a_failing_job(cluster, tmp_path):
-    """Six jobs on the cluster: ls, lssvm and ridge on two seeds, ridge given one cross-validation fold (it raises:
-    at least two are needed). The four others finish ok, the two ridge runs are recorded as failed with the error,
-    and the sweep ends with its count of failed runs (exit status 1) and the tables rebuilt from all six records. The sweep goes in batches of
+    """Six jobs on the cluster: ls, lssvm and ridge on two seeds, ridge given a grid of alphas whose low end is above
+    its high end (it raises when it fits; the settings' checks take any list of numbers). The four others finish ok,
+    the two ridge runs are recorded as failed with the error, and the sweep ends with its count of failed runs (exit status 1) and the tables rebuilt from all six records. The sweep goes in batches of
     four (hydra.sweeper.max_batch_size, how a sweep larger than a site's MaxArraySize is submitted): two arrays."""
     name, results, work, log = _sweep_places(tmp_path)
-    cmd = _sweep_cmd(results, name, "estimator=ls,lssvm,ridge", "seed=0,1", "+estimator_overrides.ridge.n_splits=1",
-                     "hydra.sweeper.max_batch_size=4")
+    cmd = _sweep_cmd(results, name, "estimator=ls,lssvm,ridge", "seed=0,1",
+                     "+estimator_overrides.ridge.alphas=[10.0,1.0,3]", "hydra.sweeper.max_batch_size=4")
     rc = _run_sweep(cmd, work, log, name)
     # the sweep ends with its count, and exit status 1 for the failed runs (study.app.sweep_finished)
     assert rc == 1 and "[study] sweep finished: 6 jobs, 2 failed, 4 ok" in log.read_text(errors="replace"), _tail(log)
@@ -221,7 +221,7 @@ def test_sweep_lands_every_record_once_and_records_a_failing_job(cluster, tmp_pa
     for (est, seed), r in by.items():
         if est == "ridge":
             assert r["status"] == "failed"
-            assert "cross-validation needs at least 2 folds" in r["error"]
+            assert "alphas must be a number or [lo, hi, num]" in r["error"]
         else:
             assert r["status"] == "ok", r.get("error")
             assert r["params"], f"{est} seed {seed}: no coefficients"
@@ -278,12 +278,12 @@ def _task_logs(results: Path) -> dict[str, str]:
 
 
 def test_grouped_sweep_lands_every_record_once_and_records_a_failing_job(cluster, tmp_path):
-    """``hydra/launcher=slurm_grouped``: six jobs (ls, lssvm and ridge on two seeds; ridge given one
-    cross-validation fold fails) in two array tasks of three jobs, each task running its jobs on a pool of two
+    """``hydra/launcher=slurm_grouped``: six jobs (ls, lssvm and ridge on two seeds; ridge given an
+    upside-down grid of alphas fails when it fits) in two array tasks of three jobs, each task running its jobs on a pool of two
     worker processes. Every record lands once, the two ridge runs are recorded as failed while the four others
     finish ok, the sweep ends with its count of failed runs (exit status 1) and the tables are rebuilt."""
     name, results, work, log = _sweep_places(tmp_path)
-    cmd = _sweep_cmd(results, name, "estimator=ls,lssvm,ridge", "seed=0,1", "+estimator_overrides.ridge.n_splits=1",
+    cmd = _sweep_cmd(results, name, "estimator=ls,lssvm,ridge", "seed=0,1", "+estimator_overrides.ridge.alphas=[10.0,1.0,3]",
                      "hydra.launcher.jobs_per_task=3", "hydra.launcher.cpus_per_task=2", launcher="slurm_grouped")
     rc = _run_sweep(cmd, work, log, name)
     out = log.read_text(errors="replace")
@@ -296,7 +296,7 @@ def test_grouped_sweep_lands_every_record_once_and_records_a_failing_job(cluster
     assert set(by) == {(e, s) for e in ("ls", "lssvm", "ridge") for s in (0, 1)}
     for (est, seed), r in by.items():
         if est == "ridge":
-            assert r["status"] == "failed" and "cross-validation needs at least 2 folds" in r["error"]
+            assert r["status"] == "failed" and "alphas must be a number or [lo, hi, num]" in r["error"]
         else:
             assert r["status"] == "ok" and r["params"], r.get("error")
     # one array of two tasks, each of which ran three jobs (its [study] job lines)

@@ -27,7 +27,7 @@ SEED = None  # no seed paper's claim
 OUTPUTS_ONLY = ("low_outputs_relative", "low_outputs")
 LIK = "cfg_estimator.params.likelihood"
 CORRECT = "cfg_estimator.params.correct_rows"  # the rows' truncation and regressors' noise removed (row_errors)
-BAND = (0.80, 0.97)  # issue 11: 90 % intervals covering the truth 80-97 % of the time are calibrated
+BAND = (0.80, 0.97)  # 90 % intervals covering the truth 80-97 % of the time are called calibrated
 
 
 def _likelihood(row) -> str:

@@ -206,6 +206,24 @@ def main(cfg: DictConfig) -> dict | None:
     return None
 
 
+def distinct_datasets(conf: dict, n: int) -> int:
+    """How many of ``n`` replicates are distinct datasets: one when nothing in the configuration draws at random
+    (no measurement noise, no coloured noise, outliers or dropouts, no random-rudder manoeuvre), since every
+    replicate would then be the same records and counting them as independent evidence would be false; else ``n``.
+    An estimator's own randomness (differential evolution's population) is no new dataset."""
+    if n <= 1 or conf.get("train"):
+        return n
+    from .maneuvers import get_maneuver
+
+    noise = conf.get("noise") or {}
+    level = noise.get("level")
+    levels = list(level.values()) if isinstance(level, dict) else [level]
+    drawn = (noise.get("kind") == "absolute" or any(float(v or 0.0) > 0 for v in levels)
+             or any(noise.get(k) for k in ("colored", "outliers", "dropouts")))
+    random = any(get_maneuver(m).type == "random" for m in (conf.get("maneuvers") or {}).get("train") or [])
+    return n if drawn or random else 1
+
+
 def _run(cfg: DictConfig) -> dict:
     from .cli import ConfigError
     from .executor import RESUME_MODES, run_guarded, run_replicated
@@ -218,7 +236,11 @@ def _run(cfg: DictConfig) -> dict:
     resume = conf.get("resume") or "code"
     if resume not in RESUME_MODES:
         raise ConfigError(f"resume={resume}: expected one of {', '.join(RESUME_MODES)}")
-    n = int(conf.get("replicates", 1))
+    asked = int(conf.get("replicates", 1))
+    n = distinct_datasets(conf, asked)
+    if n < asked and not _in_sweep():
+        print(f"replicates={asked}: nothing in this configuration is drawn at random (no measurement noise, no "
+              "random-rudder manoeuvre), so its datasets are identical: one is computed", flush=True)
     # a run on the user's files (train=...): read, checksum and check them before anything is written
     run_conf, data = study_config(conf)
     run_conf.pop("replicates", None)  # how many datasets a job draws is no part of any one dataset's run
@@ -234,7 +256,8 @@ def _run(cfg: DictConfig) -> dict:
     for record in records:
         _say_run(record, store)
     if not _in_sweep():
-        print(_key_numbers(records, store.root, on_records=data is not None), flush=True)
+        print(_key_numbers(records, store.root, on_records=data is not None,
+                          drawn=distinct_datasets(conf, 2) > 1), flush=True)
     failed = [r for r in records if r.get("status") == "failed"]
     if failed and not _in_sweep():  # a sweep goes on; it ends with its count of failed runs (sweep_finished)
         fail(EXIT_FAILED)
@@ -258,10 +281,10 @@ def _say_run(record: dict, store) -> None:
               file=sys.stderr, flush=True)
 
 
-def _key_numbers(records: list, root: Path, on_records: bool = False) -> str:
+def _key_numbers(records: list, root: Path, on_records: bool = False, drawn: bool = True) -> str:
     """What a run found, in two lines: its median coefficient error, the held-out prediction error of each
     validation manoeuvre's heading and the time (medians and the range over datasets for replicates), and the next
-    command to try."""
+    command to try (more datasets only where they would differ: ``drawn``)."""
     import numpy as np
 
     ok = [r for r in records if r.get("status") == "ok"]
@@ -292,7 +315,7 @@ def _key_numbers(records: list, root: Path, on_records: bool = False) -> str:
     if wall:
         parts.append(f"{wall:.1f} s computing")
     many = len(records) > 1
-    nxt = (f"python -m study.results show --root {root}" if many or on_records else
+    nxt = (f"python -m study.results show --root {root}" if many or on_records or not drawn else
            "python -m study replicates=20 (the same configuration on 20 independent datasets)")
     found = "; ".join(parts) if parts else ("no truth and no held-out records to score the identified model "
                                             "against (validate=<files> replays held-out records)")

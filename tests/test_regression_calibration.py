@@ -289,7 +289,7 @@ def test_a_run_whose_regressors_are_mostly_noise_cannot_tell():
     first-order correction holds), the run is not trusted whatever its truncation; with the correction made, a
     removed truncation of a few sd is trusted and one beyond ``CORRECTED_LIMIT_SD`` is not."""
     from study.identify.row_errors import RELIABILITY_MIN
-    from study.identify.truncation import CORRECTED_LIMIT_SD, verdict
+    from study.identify.trust import CORRECTED_LIMIT_SD, verdict
 
     ok, note = verdict({"K": 0.1}, "central", corrected=True, reliability=0.5 * RELIABILITY_MIN, eiv_refused=True)
     assert not ok and "cannot tell" in note and "reliability" in note

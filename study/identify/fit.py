@@ -331,10 +331,9 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
     bias_sd = {}
     if not structure.simulates and trunc_rows is not None:  # an emcee regression run: can its intervals be trusted?
         bias_sd = _bias_in_sd(model, coefs, bias_reg, coef_rows)
-        rel = [v for k, v in metrics.items() if k.startswith("est_") and k.endswith("_eiv_reliability_min")]
-        refused = any(v == 0.0 for k, v in metrics.items() if k.startswith("est_") and k.endswith("_eiv_corrected"))
-        trusted, note = _trust_verdict(est, structure, bias_sd, dropped_diff, bool(trunc_rows), bool(errors),
-                                       min(rel) if rel else None, refused)
+        # the verdict is the estimator's (emcee: study.identify.trust), from what its equations reported
+        trusted, note = est.trust_verdict(structure.name, bias_sd if trunc_rows else {}, dropped_diff, bool(errors),
+                                          metrics)
         metrics["intervals_trusted"], metrics["intervals_note"] = trusted, note
         if not trusted:
             logger.warning("intervals not trusted: %s", note)
@@ -518,20 +517,6 @@ def _bias_in_sd(model, coefs: dict, bias: dict, coef_rows: list) -> dict:
         ph, ph_b = model.physical(own), model.physical({n: v + bias.get(n, 0.0) for n, v in own.items()})
         bias = {n: float(ph_b[n] - ph[n]) for n in ph}
     return {n: (bias[n] / sd[n] if sd.get(n) else float("nan")) for n in bias if n in sd}
-
-
-def _trust_verdict(est, structure, bias_sd: dict, dropped_differences: int, stencil: bool, corrected: bool = False,
-                   reliability: float | None = None, eiv_refused: bool = False) -> tuple[bool, str]:
-    """(trusted, note) of an emcee regression run's intervals (``study.identify.truncation.verdict``); the
-    independent-rows likelihood is not calibrated whatever the bias (its intervals 8-150 times the spread,
-    README)."""
-    from .truncation import verdict
-
-    if getattr(est, "likelihood", "regression") == "regression_iid" and getattr(est, "prior_sd_", None) is None:
-        return False, ("likelihood regression_iid counts the rows as independent: intervals not calibrated "
-                       "(8-150 times the actual spread measured); use likelihood regression")
-    return verdict(bias_sd if stencil else {}, structure.name, dropped_differences, corrected, reliability,
-                   eiv_refused)
 
 
 def _all(eqs: dict) -> set:

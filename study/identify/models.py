@@ -116,9 +116,11 @@ class KindModel(Model):
         bad = [e for e in eqs if e not in EQUATIONS]
         if bad:
             raise ValueError(f"model '{self.name}': unknown equation(s) {bad}, expected some of {EQUATIONS}")
-        self.equations = {e: list(eqs[e]) for e in EQUATIONS if eqs.get(e)}
-        self.physical_names = self.equations
         self.omit = list(cfg.get("omit") or [])
+        # a term in omit is left out of the model (zero) even where its equations list it: model.omit=[Nvvr]
+        # makes "the model without N'vvr" from any model that has it
+        self.equations = {e: [c for c in eqs[e] if c not in self.omit] for e in EQUATIONS if eqs.get(e)}
+        self.physical_names = self.equations
         self.oe_names = [c for e in self.equations for c in self.equations[e]]
         self._mismatch = None
         if self.kind and self.kind != vessel.kind_name:

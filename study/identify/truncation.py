@@ -1,5 +1,6 @@
-"""Can a regression posterior's intervals be trusted? The structure's truncation bias of the coefficients,
-estimated from the run's own records (never from the truth), and the rows whose noise the likelihood cannot model.
+"""The structure's truncation bias of a regression's coefficients, estimated from the run's own records (never from
+the truth): one of the checks of whether a regression posterior's intervals can be trusted (``study.identify.trust``
+holds the verdict and its limits, quoted below).
 
 Why: emcee's regression likelihood (``study.identify.row_noise``) models the sampling noise of the rows; a
 structure's truncation error is no sampling noise (a noise-free record has it too), so the posterior covers the
@@ -62,14 +63,7 @@ from scipy.signal import savgol_filter
 TAYLOR_TERMS = 2
 #: the time window [s] of the Savitzky-Golay derivatives of the measured signals (see the module docstring)
 SMOOTH_WINDOW_S = 3.0
-#: a reported parameter biased by more than this many posterior sd: the intervals are not trusted
-BIAS_LIMIT_SD = 1.0
-#: where the likelihood removed the truncation (study.identify.row_errors): the most it may remove and still be
-#: trusted. Assumption (labelled): the estimate is within 2.5 % of the actual bias, so what is left stays below half a
-#: posterior sd. Measured on the KT Mariner (study.calibration, noise-free limit minus truth after the correction):
-#: 0.01 sd left of 1.55 sd (euler, 0.1 s, 1 % noise), 0.1 of 4.8 (euler, 1 s), 0.02 of 8.5 (euler, 0.1 s, the
-#: standard training set with sensor noise, noise=low)
-CORRECTED_LIMIT_SD = 20.0
+
 
 
 
@@ -162,35 +156,3 @@ def coefficient_bias(noise, X: np.ndarray, e: np.ndarray, centred: bool = False)
     Xw, ew = (X, e) if noise is None else (noise.whiten(X), noise.whiten(e))  # None: rows not whitened (LS)
     b, *_ = np.linalg.lstsq(Xw, ew, rcond=None)
     return b[:k]
-
-
-def verdict(bias_sd: dict, structure_name: str, dropped_differences: int = 0, corrected: bool = False,
-            reliability: float | None = None, eiv_refused: bool = False) -> tuple[bool, str]:
-    """(trusted, one-line note) from the reported parameters' estimated truncation biases in posterior sd, the
-    rows differenced then cut, and, where the likelihood removed the rows' errors (``corrected``,
-    ``study.identify.row_errors``), whether it had to leave the regressors' noise in (``eiv_refused``: their
-    smallest whitened ``reliability`` below ``row_errors.RELIABILITY_MIN``; see the module docstring)."""
-    if dropped_differences:
-        return False, (f"{structure_name}: {dropped_differences} differenced rows dropped (split/cleaning) leave "
-                       "gaps, so the differencing cannot be undone and the regressors' noise biases the estimate: "
-                       "intervals not calibrated; use euler/central/integral without split")
-    if corrected and eiv_refused:
-        rel = "" if reliability is None or not np.isfinite(reliability) else f" (reliability {reliability:.2f})"
-        return False, (f"{structure_name}: the regressors' noise is too large a part of their whitened spread{rel} "
-                       "for a first-order correction: not removed; intervals not calibrated (cannot tell)")
-    finite = {n: v for n, v in bias_sd.items() if v is not None and np.isfinite(v)}
-    if not finite:
-        return True, f"{structure_name}: truncation bias not estimated (no stencil); intervals as modelled"
-    worst = max(finite, key=lambda n: abs(finite[n]))
-    b = abs(finite[worst])
-    if corrected:
-        if b > CORRECTED_LIMIT_SD:
-            return False, (f"{structure_name} truncation of {b:.1f} posterior sd on {worst} removed, more than "
-                           f"{CORRECTED_LIMIT_SD:g} sd: its estimate's error may exceed half a sd; intervals not "
-                           "calibrated; sample finer or use central/integral")
-        return True, (f"{structure_name} truncation of at most {b:.2f} posterior sd ({worst}) and the regressors' "
-                      "noise removed: intervals trusted")
-    if b > BIAS_LIMIT_SD:
-        return False, (f"{structure_name} truncation biases {worst} by {b:.1f} posterior sd: intervals not "
-                       "calibrated; sample finer or use central/integral")
-    return True, f"{structure_name} truncation bias at most {b:.2f} posterior sd ({worst}): intervals trusted"

@@ -299,6 +299,18 @@ class EmceeSampler(Estimator):
         """Whether :meth:`fit` wants the structure's noise operators (``study.identify.fit`` passes them)."""
         return self.likelihood == "regression"
 
+    def trust_verdict(self, structure_name: str, bias_sd: dict, dropped_differences: int, corrected: bool,
+                      metrics: dict) -> tuple[bool, str]:
+        """(trusted, note) of a regression run's intervals (:func:`study.identify.trust.run_verdict`), from the
+        run's own records: ``bias_sd`` the structure's truncation bias per reported parameter in posterior sd,
+        ``dropped_differences`` differenced rows cut afterwards, ``corrected`` whether the rows' errors were
+        removed, ``metrics`` the diagnostics every equation reported. An informative prior's posterior (the MAP
+        estimator's) is judged as the regression likelihood's."""
+        from ..trust import run_verdict
+
+        likelihood = self.likelihood if getattr(self, "prior_sd_", None) is None else "regression"
+        return run_verdict(likelihood, structure_name, bias_sd, dropped_differences, corrected, metrics)
+
     def _default_prior_sd(self, X, y) -> np.ndarray:
         sd_y = float(np.std(y)) or 1.0
         rms = np.sqrt(np.mean(X ** 2, axis=0))

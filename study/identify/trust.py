@@ -1,0 +1,74 @@
+"""Can an emcee regression run's intervals be trusted? The verdict, from the run's own records only (never from the
+truth), that the run reports as ``intervals_trusted`` with a one-line ``intervals_note``.
+
+Only emcee's regression likelihood has intervals meant to cover the truth, so only it asks (its
+:meth:`~study.identify.estimators.bayes.EmceeSampler.trust_verdict`); keeping the verdict here, apart from the
+identification engine, means changing it changes the code fingerprint of emcee's runs only. The checks, in order:
+
+1. **The likelihood's own assumptions**: the independent-rows likelihood (``regression_iid``) is never calibrated;
+   rows differenced and then cut (``diff_center``'s split, z-score cleaning) leave gaps the whitening cannot undo;
+   the regressors' noise too large for a first-order removal (``study.identify.row_errors``).
+2. **The structure's truncation** (``study.identify.truncation``): its estimated bias of each reported parameter, in
+   posterior sd, against :data:`BIAS_LIMIT_SD`, or, where the likelihood removed it, against
+   :data:`CORRECTED_LIMIT_SD`.
+
+The limits' reasons are in :mod:`study.identify.truncation`'s docstring.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["BIAS_LIMIT_SD", "CORRECTED_LIMIT_SD", "verdict", "run_verdict"]
+
+#: a reported parameter biased by more than this many posterior sd: the intervals are not trusted
+BIAS_LIMIT_SD = 1.0
+#: where the likelihood removed the truncation (study.identify.row_errors): the most it may remove and still be
+#: trusted. Assumption (labelled): the estimate is within 2.5 % of the actual bias, so what is left stays below half a
+#: posterior sd. Measured on the KT Mariner (study.calibration, noise-free limit minus truth after the correction):
+#: 0.01 sd left of 1.55 sd (euler, 0.1 s, 1 % noise), 0.1 of 4.8 (euler, 1 s), 0.02 of 8.5 (euler, 0.1 s, the
+#: standard training set with sensor noise, noise=low)
+CORRECTED_LIMIT_SD = 20.0
+
+
+def verdict(bias_sd: dict, structure_name: str, dropped_differences: int = 0, corrected: bool = False,
+            reliability: float | None = None, eiv_refused: bool = False) -> tuple[bool, str]:
+    """(trusted, one-line note) from the reported parameters' estimated truncation biases in posterior sd, the
+    rows differenced then cut, and, where the likelihood removed the rows' errors (``corrected``,
+    ``study.identify.row_errors``), whether it had to leave the regressors' noise in (``eiv_refused``: their
+    smallest whitened ``reliability`` below ``row_errors.RELIABILITY_MIN``; see the module docstring)."""
+    if dropped_differences:
+        return False, (f"{structure_name}: {dropped_differences} differenced rows dropped (split/cleaning) leave "
+                       "gaps, so the differencing cannot be undone and the regressors' noise biases the estimate: "
+                       "intervals not calibrated; use euler/central/integral without split")
+    if corrected and eiv_refused:
+        rel = "" if reliability is None or not np.isfinite(reliability) else f" (reliability {reliability:.2f})"
+        return False, (f"{structure_name}: the regressors' noise is too large a part of their whitened spread{rel} "
+                       "for a first-order correction: not removed; intervals not calibrated (cannot tell)")
+    finite = {n: v for n, v in bias_sd.items() if v is not None and np.isfinite(v)}
+    if not finite:
+        return True, f"{structure_name}: truncation bias not estimated (no stencil); intervals as modelled"
+    worst = max(finite, key=lambda n: abs(finite[n]))
+    b = abs(finite[worst])
+    if corrected:
+        if b > CORRECTED_LIMIT_SD:
+            return False, (f"{structure_name} truncation of {b:.1f} posterior sd on {worst} removed, more than "
+                           f"{CORRECTED_LIMIT_SD:g} sd: its estimate's error may exceed half a sd; intervals not "
+                           "calibrated; sample finer or use central/integral")
+        return True, (f"{structure_name} truncation of at most {b:.2f} posterior sd ({worst}) and the regressors' "
+                      "noise removed: intervals trusted")
+    if b > BIAS_LIMIT_SD:
+        return False, (f"{structure_name} truncation biases {worst} by {b:.1f} posterior sd: intervals not "
+                       "calibrated; sample finer or use central/integral")
+    return True, f"{structure_name} truncation bias at most {b:.2f} posterior sd ({worst}): intervals trusted"
+
+
+def run_verdict(likelihood: str, structure_name: str, bias_sd: dict, dropped_differences: int, corrected: bool,
+                metrics: dict) -> tuple[bool, str]:
+    """(trusted, note) of a run: :func:`verdict` with what the run's equations reported (``metrics``: the
+    ``est_<equation>_<diagnostic>`` entries of the results table) and the likelihood's own limit."""
+    if likelihood == "regression_iid":
+        return False, ("likelihood regression_iid counts the rows as independent: intervals not calibrated "
+                       "(8-150 times the actual spread measured); use likelihood regression")
+    rel = [v for k, v in metrics.items() if k.startswith("est_") and k.endswith("_eiv_reliability_min")]
+    refused = any(v == 0.0 for k, v in metrics.items() if k.startswith("est_") and k.endswith("_eiv_corrected"))
+    return verdict(bias_sd, structure_name, dropped_differences, corrected, min(rel) if rel else None, refused)

@@ -111,10 +111,11 @@ def write_claims(out: Path, indexes: dict, not_built: list, seeds: dict) -> None
 
 
 def study_slice(runs: pd.DataFrame, params: pd.DataFrame, name: str) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """One study's finished runs and their parameter rows, as stored (not yet joined), without the columns that
+    """One study's finished and failed runs and their parameter rows, as stored (not yet joined), without the columns that
     are empty for every one of its rows (another study's settings): the same frames whether they come from a
     results folder that holds many studies or from the study's own committed table."""
-    r = runs[(runs["cfg_study"] == name) & (runs["status"] == "ok")] if len(runs) else runs
+    # failed runs are kept: a claim counts a failed fit as a loss of its method, never drops it
+    r = runs[(runs["cfg_study"] == name) & runs["status"].isin(["ok", "failed"])] if len(runs) else runs
     q = params[params["run_id"].isin(set(r["run_id"]))] if len(params) else params
     # through parquet once: a column typed 'object' in a table of many studies (bools beside another study's
     # nulls) comes back as the type its own values have, as it will from the study's committed table
@@ -133,6 +134,7 @@ def build_study(b: Builder, module, runs_raw, params_raw, table: bool = True) ->
     runs, params = prepare_tables(r_raw, p_raw)
     first, claims = len(b.written), []
     b.read = set()
+    b.all_runs = r_raw  # with the failed ones, which claims count as losses
     module.build(b, runs, params, claims)
     outs = b.written[first:]
     idx = {"study": name, "runs": int(len(runs)),

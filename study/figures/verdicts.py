@@ -116,7 +116,9 @@ def summary(per_model: dict, noun: str = "models") -> str:
     counts = pd.Series(list(per_model.values())).value_counts()
     top = counts.index[0]
     if counts.iloc[0] == n:
-        return f"{top} for {'the one' if n == 1 else 'both' if n == 2 else f'all {n}'} {noun}"
+        if n == 1:  # "the one model order", not "the one model orders"
+            return f"{top} for {next(iter(per_model))}"
+        return f"{top} for {'both' if n == 2 else f'all {n}'} {noun}"
     if 2 * counts.iloc[0] <= n:  # no majority: every verdict with what it applies to
         groups = [f"{v} for {', '.join(m for m, x in per_model.items() if x == v)}" for v in counts.index]
         return f"mixed over the {n} {noun}: " + "; ".join(groups)
@@ -194,7 +196,7 @@ def _critical_wins(n: int, alpha: float = ALPHA) -> int | None:
 def detectable_win_rate(n: int, power: float = POWER, alpha: float = ALPHA) -> float:
     """The smallest probability of a win that ``n`` decided pairs detect with the sign test with probability
     ``power`` (inf when no win rate can be detected: too few pairs)."""
-    k = _critical_wins(n, alpha)
+    k = _critical_wins(n, alpha) if n >= 1 else None
     if k is None:
         return math.inf
     lo, hi = 0.5, 1.0
@@ -284,3 +286,100 @@ def label_invariant(p: pd.DataFrame, groups: list, by: str = "run_id") -> pd.Dat
             if "abs_rel_error" in out:
                 out.loc[idx, "abs_rel_error"] = np.abs(rel)
     return out
+
+
+# ------------------------------------------------------------------------ one sensitivity display for every claim
+
+#: the columns of every claim's sensitivity table, in order
+SENSITIVITY_COLUMNS = ["claim", "comparison", "choice", "verdict", "unit", "datasets", "wins", "losses", "ties",
+                       "failed_a", "failed_b", "p", "p_reverse", "ratio", "ratio_low", "ratio_high",
+                       "detectable_ratio"]
+
+
+def _dataset_keys(p: pd.DataFrame, keys: list) -> list:
+    """``keys`` plus the replicate (each replicate is its own dataset), where the table has it."""
+    return list(keys) + [c for c in ("replicate",) if c in p.columns and c not in keys]
+
+
+def _fill_replicate(d: pd.DataFrame | None) -> pd.DataFrame | None:
+    if d is not None and "replicate" in d.columns:
+        d = d.assign(replicate=d["replicate"].fillna(0).astype(int))
+    return d
+
+
+def compare_datasets(p: pd.DataFrame, by: str, a, b, keys: list, metric: str = "abs_rel_error",
+                     runs: pd.DataFrame | None = None, summary: str = "median", tie: float = TIE,
+                     floor: float = 0.0) -> dict:
+    """:func:`paired_datasets` of method ``a`` against ``b`` (values of column ``by``) over the datasets named by
+    ``keys`` and the replicate: one error per dataset and method (``summary`` of ``metric`` over the run's
+    coefficients), a failed run an infinite error. ``summary='coefficient'``: each coefficient its own pair (the
+    coefficients of one fit are not independent; shown only as the counting unit a reader might expect)."""
+    p, runs = _fill_replicate(p), _fill_replicate(runs)
+    k = _dataset_keys(p, keys)
+    if summary == "coefficient":
+        r = compare(p, by, a, b, k, metric, "coefficient", tie=tie, floor=floor)
+        return {**r, "datasets": r["pairs"], "failed_a": 0, "failed_b": 0, "ratio": r["median_ratio"],
+                "ratio_low": math.nan, "ratio_high": math.nan, "detectable_ratio": math.nan}
+    q = p[p[by].isin([a, b])]
+    rr = None if runs is None else runs[runs[by].isin([a, b])]
+    if not len(q) and (rr is None or not len(rr)):
+        return {**paired_datasets([], []), "pairs": 0}
+    tab = dataset_errors(q, by, k, metric, runs=rr, summary=summary)
+    if a not in tab or b not in tab:
+        return {**paired_datasets([], []), "pairs": 0}
+    return paired_datasets(tab[a].to_numpy(float), tab[b].to_numpy(float), tie=tie, floor=floor)
+
+
+def dataset_sensitivity(claim: str, comparison: str, p: pd.DataFrame, runs: pd.DataFrame | None, by: str, a, b,
+                        keys: list, subsets: list = (), metric: str = "abs_rel_error", tie: float = TIE,
+                        floor: float = 0.0, alt_metric: str | None = "scaled_error") -> pd.DataFrame:
+    """One claim's comparison under its primary choice and every other reasonable one, one row each
+    (:data:`SENSITIVITY_COLUMNS`). The primary: datasets as the unit, the median of ``metric`` over each run's
+    coefficients, ties within ``tie``, both errors below ``floor`` a tie. Always varied: the tie (1 %, 10 %), the
+    floor (none; ten times, or 0.1 % where there is none), the per-dataset summary (mean), the counting unit
+    (coefficients, not independent), the metric (``alt_metric`` where the table has it); then each of
+    ``subsets``: ``(label, params, runs)`` (one noise level, one sampling interval, one model...)."""
+    rows = []
+
+    def add(label, pp, rr, **kw):
+        args = {"metric": metric, "summary": "median", "tie": tie, "floor": floor, **kw}
+        r = compare_datasets(pp, by, a, b, keys, runs=rr, **args)
+        unit = "coefficients (not independent)" if args["summary"] == "coefficient" else "datasets"
+        rows.append({"claim": claim, "comparison": comparison, "choice": "primary" if not rows else label,
+                     "what": label, "unit": unit, **r})
+
+    add("datasets, median relative error of each run's coefficients", p, runs)
+    add("ties within 1 %", p, runs, tie=0.01)
+    add("ties within 10 %", p, runs, tie=0.10)
+    add("no floor" if floor else "floor 0.1 %", p, runs, floor=0.0 if floor else 0.001)
+    if floor:
+        add(f"floor {100 * 10 * floor:g} %", p, runs, floor=10 * floor)
+    add("datasets, mean relative error of each run's coefficients", p, runs, summary="mean")
+    add("coefficients as the unit (not independent)", p, runs, summary="coefficient")
+    if alt_metric and alt_metric in p.columns and p[alt_metric].notna().any():
+        add(f"metric {alt_metric} (error in units of its equation)", p, runs, metric=alt_metric)
+    for label, pp, rr in subsets:
+        add(label, pp, rr)
+    t = pd.DataFrame(rows)
+    t = t[t["pairs"] > 0] if len(t) > 1 else t
+    return t
+
+
+def dataset_verdict(t: pd.DataFrame) -> tuple[str, str]:
+    """(verdict, numbers) of a :func:`dataset_sensitivity` table: the primary verdict, or 'depends on the choice'
+    naming every choice that flips it (:func:`settle`), and the primary's numbers (:func:`describe_datasets`)
+    with the flips' own verdicts."""
+    if not len(t):
+        return "not run", "no datasets"
+    prim = t.iloc[0].to_dict()
+    off = t[(t["choice"] != "primary") & (t["verdict"] != prim["verdict"])]
+    text = describe_datasets(prim)
+    text += ("; flips: " + ", ".join(f"{w}: {v}" for w, v in zip(off["what"], off["verdict"])) if len(off) else
+             f"; the same under all {len(t) - 1} other choices")
+    return settle(t), text
+
+
+def tidy_sensitivity(t: pd.DataFrame) -> pd.DataFrame:
+    """The sensitivity table as written: :data:`SENSITIVITY_COLUMNS`, the choice's label in ``choice``."""
+    t = t.assign(choice=t["what"]) if "what" in t else t
+    return t[[c for c in SENSITIVITY_COLUMNS if c in t.columns]]

@@ -383,3 +383,52 @@ def tidy_sensitivity(t: pd.DataFrame) -> pd.DataFrame:
     """The sensitivity table as written: :data:`SENSITIVITY_COLUMNS`, the choice's label in ``choice``."""
     t = t.assign(choice=t["what"]) if "what" in t else t
     return t[[c for c in SENSITIVITY_COLUMNS if c in t.columns]]
+
+
+# ------------------------------------------------------------------------------ coverage with the dataset as the unit
+
+#: 90 % intervals covering the truth 80-97 % of the time are called calibrated
+COVERAGE_BAND = (0.80, 0.97)
+NOMINAL = 0.90
+
+
+def coverage_over_datasets(p: pd.DataFrame, dataset: str = "run_id", nominal: float = NOMINAL,
+                           band: tuple = COVERAGE_BAND, n_boot: int = N_BOOT, seed: int = 0) -> dict:
+    """Coverage of the truth by the intervals (``ci_low``, ``ci_high``) of ``p``'s rows, the dataset (``dataset``:
+    one run is one dataset) as the unit: the share of intervals that hold the truth, with its 95 % percentile
+    bootstrap interval over datasets (the coefficients of one fit miss together, so they are resampled together),
+    how the misses fall (datasets that miss none, every one, of their coefficients) and the verdict: **holds** when
+    the coverage is inside ``band`` and its interval holds ``nominal``; **does not hold** when it is outside the band
+    and its interval excludes ``nominal``; **cannot tell** otherwise."""
+    if not len(p):
+        return {"datasets": 0, "intervals": 0, "covered": 0, "coverage": math.nan, "cov_low": math.nan,
+                "cov_high": math.nan, "verdict": "not run"}
+    hit = ((p["ci_low"] <= p["truth"]) & (p["truth"] <= p["ci_high"])).astype(float)
+    g = pd.DataFrame({"d": p[dataset].to_numpy(), "hit": hit.to_numpy()}).groupby("d")["hit"].agg(["sum", "count"])
+    k, n = g["sum"].to_numpy(float), g["count"].to_numpy(float)
+    cov = float(k.sum() / n.sum())
+    if len(g) > 1:
+        rng = np.random.default_rng(seed)
+        idx = rng.integers(0, len(g), size=(n_boot, len(g)))
+        boot = k[idx].sum(axis=1) / n[idx].sum(axis=1)
+        lo, hi = (float(x) for x in np.quantile(boot, [0.025, 0.975]))
+    else:
+        lo, hi = 0.0, 1.0  # one dataset: its coefficients are one draw
+    inside, holds_nominal = band[0] <= cov <= band[1], lo <= nominal <= hi
+    verdict = ("holds" if inside and holds_nominal else
+               "does not hold" if not inside and not holds_nominal else "cannot tell")
+    width = ((p["ci_high"] - p["ci_low"]) / p["truth"].abs().where(p["truth"] != 0)).median()
+    err = (p["estimate"] - p["truth"]).abs() / p["truth"].abs().where(p["truth"] != 0)
+    return {"datasets": int(len(g)), "intervals": int(n.sum()), "covered": int(k.sum()), "coverage": cov,
+            "cov_low": lo, "cov_high": hi, "all_covered": int(np.sum(k == n)), "none_covered": int(np.sum(k == 0)),
+            "median_rel_width": float(width), "median_abs_rel_error": float(err.median()), "verdict": verdict}
+
+
+def describe_coverage(c: dict) -> str:
+    """One line of :func:`coverage_over_datasets`."""
+    if not c.get("datasets"):
+        return "no datasets"
+    return (f"{int(c['covered'])}/{int(c['intervals'])} intervals of {int(c['datasets'])} datasets covered "
+            f"({100 * c['coverage']:.0f} %, 95 % over datasets {100 * c['cov_low']:.0f}-{100 * c['cov_high']:.0f} %; "
+            f"datasets missing every coefficient {int(c['none_covered'])}, none {int(c['all_covered'])}; median width "
+            f"{100 * c['median_rel_width']:.3g} % of the truth, median error {100 * c['median_abs_rel_error']:.2g} %)")

@@ -4,11 +4,11 @@
 ``python -m study.figures`` finds this module by the study's name (``conf/experiment/emcee_kt.yaml``).
 
 How a calibration verdict is decided: over the datasets (seeds) of one set-up, each coefficient's 90 % interval
-either holds the truth or not. Coverage is judged by the exact two-sided binomial test against 0.9 at the 5 %
-level and by the issue's band 80-97 %: **holds** when the test does not reject 0.9 and the coverage lies in the
-band; **does not hold** when the test rejects it and the coverage lies outside the band; **cannot tell** otherwise
-(too few intervals to tell). The intervals of one dataset's three coefficients are not independent, so the test
-is stated per interval with that caveat; the Wilson interval of the coverage is given beside it. Each claim is
+either holds the truth or not. The coverage (the share of intervals that hold it) comes with a 95 % bootstrap
+interval over datasets: the intervals of one dataset miss together, so they are resampled together
+(:func:`study.figures.verdicts.coverage_over_datasets`). **holds** when the coverage lies in the band 80-97 % and
+its interval holds 0.9; **does not hold** when it lies outside the band and its interval excludes 0.9; **cannot
+tell** otherwise (too few datasets to tell). Each claim is
 then restated under every other set-up of the sweep (noise definition, sampling interval): a verdict that changes
 says "depends on ..."."""
 from __future__ import annotations
@@ -19,7 +19,7 @@ import pandas as pd
 from scipy import stats
 
 from ..plots import Builder, _first, _order, emcee_figures, NOISE_ORDER, STRUCTURE_ORDER
-from ..verdicts import ALPHA, settle
+from ..verdicts import coverage_over_datasets, describe_coverage, settle
 
 NAME = "emcee_kt"
 SEED = None  # no seed paper's claim
@@ -41,21 +41,9 @@ def _likelihood(row) -> str:
 
 
 def coverage(p: pd.DataFrame) -> dict:
-    """Coverage of the truth by the 90 % intervals of ``p``'s rows, with its binomial test and verdict."""
-    hit = (p["ci_low"] <= p["truth"]) & (p["truth"] <= p["ci_high"])
-    n, k = int(len(p)), int(hit.sum())
-    if not n:
-        return {"intervals": 0, "covered": 0, "coverage": math.nan, "p_binomial": math.nan, "verdict": "not run"}
-    test = stats.binomtest(k, n, 0.9)
-    lo, hi = test.proportion_ci(0.95, method="wilson")
-    cov = k / n
-    inside = BAND[0] <= cov <= BAND[1]
-    verdict = ("holds" if test.pvalue >= ALPHA and inside else
-               "does not hold" if test.pvalue < ALPHA and not inside else "cannot tell")
-    width = ((p["ci_high"] - p["ci_low"]) / p["truth"].abs()).median()
-    return {"intervals": n, "covered": k, "coverage": cov, "wilson_low": lo, "wilson_high": hi,
-            "p_binomial": float(test.pvalue), "median_abs_rel_error": float(p["abs_rel_error"].median()),
-            "median_rel_width": float(width), "verdict": verdict}
+    """Coverage of the truth by the 90 % intervals of ``p``'s rows, the dataset (run) as the unit
+    (:func:`study.figures.verdicts.coverage_over_datasets`)."""
+    return coverage_over_datasets(p)
 
 
 def build(b: Builder, runs, params, claims):
@@ -148,7 +136,7 @@ def trust_claim(p: pd.DataFrame, b: Builder | None = None) -> list:
         n_no = int(d.loc[d["trusted"] == "not trusted", "run_id"].nunique())
         lines.append(f"{st}: trusted runs {_line(yes)}" if yes["intervals"] else f"{st}: no run trusted")
         lines[-1] += (f"; {n_no} of {d['run_id'].nunique()} runs flagged, their intervals "
-                      f"{100 * no['coverage']:.0f} % covered" if n_no else "; no run flagged")
+                      f"{100 * no['coverage']:.0f} % covered" if n_no else "; no run flagged (the flag never fired)")
     verdicts = [v for v in per.values() if v != "not run"]
     verdict = ("not run" if not verdicts else
                "; ".join(f"{v} for {', '.join(k for k, x in per.items() if x == v)}" for v in dict.fromkeys(verdicts)))
@@ -168,9 +156,7 @@ def _sensitivity(cov: pd.DataFrame, primary: pd.Series) -> pd.DataFrame:
 
 
 def _line(c) -> str:
-    return (f"{c['covered']}/{c['intervals']} covered ({100 * c['coverage']:.0f} %, Wilson 95 % "
-            f"{100 * c['wilson_low']:.0f}-{100 * c['wilson_high']:.0f} %; binomial p = {c['p_binomial']:.2g}; median "
-            f"width {100 * c['median_rel_width']:.3g} % of the truth, median error {100 * c['median_abs_rel_error']:.2g} %)")
+    return describe_coverage(c)
 
 
 def claim(cov: pd.DataFrame, b: Builder | None = None) -> list:
@@ -224,8 +210,8 @@ def claim(cov: pd.DataFrame, b: Builder | None = None) -> list:
                     "numbers": "; ".join(lines) + "."})
     if b is not None and tabs:
         t = pd.concat(tabs, ignore_index=True)
-        cols = ["claim", "structure", "choice", "verdict", "intervals", "covered", "coverage", "wilson_low",
-                "wilson_high", "p_binomial", "median_rel_width", "median_abs_rel_error"]
+        cols = ["claim", "structure", "choice", "verdict", "datasets", "intervals", "covered", "coverage", "cov_low",
+                "cov_high", "none_covered", "all_covered", "median_rel_width", "median_abs_rel_error"]
         b.table(t[cols], NAME, "claim_sensitivity", "emcee_kt: each calibration claim at its primary set-up (finest "
                 "sampling, noise on the outputs only) and under every other set-up of the sweep", floatfmt=".3g")
     return out

@@ -25,7 +25,10 @@ def build(b: Builder, runs, params, claims):
     s = "seed001_shallow_water"
     r, p = runs[runs["cfg_study"] == s], params[params["cfg_study"] == s]
     plt = _plt()
-    p = p.copy()
+    # a table of deep water only has no h/T column (empty columns are not stored)
+    r, p = (d.assign(**{"cfg_depth.h_T": d.get("cfg_depth.h_T", np.nan)}) for d in (r, p))
+    if b.all_runs is not None:
+        b.all_runs = b.all_runs.assign(**{"cfg_depth.h_T": b.all_runs.get("cfg_depth.h_T", np.nan)})
     p["hT"] = p["cfg_depth.h_T"].map(_hT)
     L = p["cfg_vessel.particulars.Lpp"].astype(float)
     U = p["cfg_vessel.operation.U0"].astype(float)

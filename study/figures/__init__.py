@@ -25,6 +25,7 @@ import os
 import sys
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from .plots import REPO, Builder, Output, _cell, prepare_tables
@@ -90,14 +91,27 @@ def write_claims(out: Path, indexes: dict, not_built: list, seeds: dict) -> None
     lines = ["# Claims of the seed papers, tested", "",
              "Rebuilt by `python -m study.figures` from the results table: each seed paper's headline claim (compound "
              "claims split), the study that tests it on this harness's simulated data, and the verdict with its "
-             "numbers. A verdict is decided by paired comparisons (the same data identified both ways, coefficient "
-             "by coefficient, per model: never pooled across models of different order or size) with a one-sided "
-             "sign test at the 5 % level, ties (within 5 %, or both errors negligible) counted as ties: **holds**, "
-             "**does not hold**, or **cannot tell** when neither side wins beyond chance. Each study's "
-             "`claim_sensitivity` table gives the verdict under every other reasonable choice (metric, pairing, "
-             "noise level, sampling interval, model); a verdict that changes says so (*depends on the choice*). "
-             "Rows marked *earlier scoring* come from a study not re-run since: there the verdict is the share of "
-             "set-ups (holds: at least 80 %; holds in part: 30-80 %; does not hold: fewer).", "",
+             "numbers.", "",
+             "**The unit is the dataset.** Each compared cell holds independent datasets (replicates: their own "
+             "measurement noise and random rudder signal). A comparison of two methods reduces each of their fits "
+             "to one error per dataset (the median relative error of its coefficients: the coefficients of one fit "
+             "are never counted as separate evidence) and a failed fit to an infinite error (a loss). The test is "
+             "the one-sided sign test over datasets at the 5 % level, ties (median errors within 5 %, or both below "
+             "the study's floor) counted as ties: **holds**, **does not hold**, or **cannot tell** when neither side "
+             "wins beyond chance. The effect size is the median error ratio over datasets with its 95 % bootstrap "
+             "interval; a *cannot tell* names the smallest ratio its datasets could have detected with 80 % power, "
+             "so that \"no difference\" and \"too few data\" read differently. A set-up where nothing is drawn at "
+             "random (no noise, no random manoeuvre) is one dataset, said so. Coverage claims resample whole "
+             "datasets (their coefficients miss together); properties of each dataset (settling, term selection) "
+             "count datasets with a Wilson interval.", "",
+             "**Every choice that flips a verdict is named** (*depends on the choice*). Each study's "
+             "`claim_sensitivity` table repeats every comparison with ties within 1 % and 10 %, without the floor "
+             "and with ten times it, the per-dataset mean instead of the median, the coefficients as the unit (not "
+             "independent: shown for the reader who expects it), the scaled error, each noise level, sampling "
+             "interval and model. Claims about a method are decided where the method acted (truncation: on the "
+             "datasets where the L-curve dropped a column, how often said); exchangeable parameters (T1, T2) are "
+             "scored without their labels; a model no estimator identifies is reported apart; what the simulator "
+             "imposes is labelled a consistency check.", "",
              "| seed | claim | study | verdict | numbers |", "|---|---|---|---|---|"]
     claims = sorted((c for idx in indexes.values() for c in idx.get("claims") or []),
                     key=lambda c: _claim_key(c, seeds))
@@ -107,6 +121,23 @@ def write_claims(out: Path, indexes: dict, not_built: list, seeds: dict) -> None
                      f"{_cell(c['numbers'])} |")
     for m in sorted((m for m in not_built if seeds.get(m)), key=lambda m: seeds[m]):
         lines.append(f"| {seeds[m]} | (see the seed's row when run) | `{m}` | not run | - |")
+    lines += ["", "## The runs behind each study", "",
+              "The code revision that computed each study's runs (from their provenance) and whether the code on disk "
+              "at this rebuild would compute every one of them the same way (each run's code fingerprint against its "
+              "configuration's now: `study.fingerprint`). A study with stale runs is re-run before its verdicts are "
+              "read.", "", "| study | runs | datasets per compared cell | computed at revision | current |",
+              "|---|---|---|---|---|"]
+    for name, idx in sorted(indexes.items()):
+        code = idx.get("code") or {}
+        if not idx.get("claims") or not code:
+            continue
+        revs = ", ".join(f"`{k[:12]}{'-dirty' if k.endswith('-dirty') else ''}` ({v})"
+                         for k, v in sorted((code.get("revisions") or {}).items(), key=lambda kv: -kv[1]))
+        cur = ("every run" if code.get("stale") == 0 else f"{code.get('current')} of {code.get('runs')} "
+               f"(**{code.get('stale')} stale**)")
+        cells = idx.get("datasets_per_cell") or {}
+        per = f"{cells.get('min', '?')}-{cells.get('max', '?')}" if cells else "?"
+        lines.append(f"| `{name}` | {code.get('runs', 0)} | {per} | {revs or 'unknown'} | {cur} |")
     (out / "CLAIMS.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 
@@ -124,6 +155,53 @@ def study_slice(runs: pd.DataFrame, params: pd.DataFrame, name: str) -> tuple[pd
     return r, q
 
 
+def run_config(row: pd.Series) -> dict:
+    """The part of a run's configuration its code fingerprint depends on (``study.fingerprint.entries``), read back
+    from its row of the runs table."""
+    def val(col):
+        v = row.get(col)
+        if isinstance(v, str) and v[:1] in "[{":
+            try:
+                return json.loads(v)
+            except ValueError:
+                return v
+        return None if v is None or (isinstance(v, float) and np.isnan(v)) else v
+
+    return {"vessel": {"kind": val("cfg_vessel.kind")}, "model": {"effects": val("cfg_model.effects") or []},
+            "estimator": {"_target_": val("cfg_estimator._target_")},
+            "maneuvers": {"train": val("cfg_maneuvers.train") or [], "validate": val("cfg_maneuvers.validate") or []},
+            "train": val("cfg_train"), "study": val("cfg_study")}
+
+
+def code_status(runs: pd.DataFrame) -> dict:
+    """Which runs of a table the code on disk would compute the same way: each run's stored code fingerprint against
+    the fingerprint of its configuration now (``study.fingerprint``), with the revisions that computed them."""
+    from .. import fingerprint
+
+    if not len(runs):
+        return {"runs": 0, "current": 0, "stale": 0, "revisions": {}}
+    now = [fingerprint.code_fingerprint(run_config(row))["fingerprint"] for _, row in runs.iterrows()]
+    stored = runs["code_fingerprint"] if "code_fingerprint" in runs else pd.Series(None, index=runs.index)
+    current = int(sum(a == b for a, b in zip(stored, now)))
+    revs = runs["prov_git_rev"].fillna("unknown").value_counts() if "prov_git_rev" in runs else pd.Series(dtype=int)
+    return {"runs": int(len(runs)), "current": current, "stale": int(len(runs) - current),
+            "revisions": {str(k): int(v) for k, v in revs.items()}}
+
+
+def datasets_per_cell(runs: pd.DataFrame) -> dict:
+    """How many datasets each configuration (cell) of a study's table holds: the smallest and largest over the cells
+    where something is drawn at random (measurement noise), and how many cells are one dataset by construction (no
+    noise: every replicate would be the same records)."""
+    cfg = [c for c in runs.columns if c.startswith("cfg_")]
+    if not len(runs) or not cfg:
+        return {}
+    n = runs[cfg].astype(str).groupby(cfg, dropna=False).size()
+    noise = runs.groupby(cfg, dropna=False)["cfg_noise.name"].first().astype(str) if "cfg_noise.name" in runs else None
+    drawn = n if noise is None else n[(noise != "none").to_numpy()]
+    return {"min": int(drawn.min()) if len(drawn) else 0, "max": int(drawn.max()) if len(drawn) else 0,
+            "cells": int(len(n)), "one_dataset_cells": int(len(n) - len(drawn))}
+
+
 def build_study(b: Builder, module, runs_raw, params_raw, table: bool = True) -> dict:
     """Rebuild one study into ``<out>/<name>/``: its outputs, then its index; files of that folder this rebuild
     did not write (outputs a changed study no longer makes) are removed, nothing outside it is touched. With
@@ -137,7 +215,8 @@ def build_study(b: Builder, module, runs_raw, params_raw, table: bool = True) ->
     b.all_runs = r_raw  # with the failed ones, which claims count as losses
     module.build(b, runs, params, claims)
     outs = b.written[first:]
-    idx = {"study": name, "runs": int(len(runs)),
+    idx = {"study": name, "runs": int(len(runs)), "code": code_status(r_raw),
+           "datasets_per_cell": datasets_per_cell(r_raw),
            "outputs": [{"path": o.path, "what": o.what} for o in sorted(outs, key=lambda o: o.path)],
            "claims": claims}
     folder = b.out / name

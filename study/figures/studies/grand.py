@@ -19,9 +19,6 @@ from ..verdicts import compare_datasets, dataset_sensitivity, dataset_verdict, s
 
 NAME = "grand"
 SEED = None  # no seed paper's claim
-#: the data a pair shares: the same vessel, model, depth, structure, estimator, seed and sampling interval
-KEYS = ["cfg_vessel.name", "cfg_model.name", "cfg_depth.h_T", "cfg_structure.name", "cfg_estimator.name", "cfg_seed",
-        "m_sample_dt_LU"]
 #: relative errors below 0.1 % at both noise levels are a tie: neither is worse where both are exact enough
 FLOOR = 1e-3
 DEPTH_ORDER = ["deep", "5.6", "2.9", "1.46", "1.32"]

@@ -121,6 +121,10 @@ def write_claims(out: Path, indexes: dict, not_built: list, seeds: dict) -> None
                      f"{_cell(c['numbers'])} |")
     for m in sorted((m for m in not_built if seeds.get(m)), key=lambda m: seeds[m]):
         lines.append(f"| {seeds[m]} | (see the seed's row when run) | `{m}` | not run | - |")
+    deps = [(name, idx["departures"]) for name, idx in sorted(indexes.items()) if idx.get("departures")]
+    if deps:
+        lines += ["", "## Where each study departs from its paper", ""]
+        lines += [f"- `{name}`: {_cell(text)}" for name, text in deps]
     lines += ["", "## The runs behind each study", "",
               "The code revision that computed each study's runs (from their provenance) and whether the code on disk "
               "at this rebuild would compute every one of them the same way (each run's code fingerprint against its "
@@ -216,7 +220,7 @@ def build_study(b: Builder, module, runs_raw, params_raw, table: bool = True) ->
     module.build(b, runs, params, claims)
     outs = b.written[first:]
     idx = {"study": name, "runs": int(len(runs)), "code": code_status(r_raw),
-           "datasets_per_cell": datasets_per_cell(r_raw),
+           "datasets_per_cell": datasets_per_cell(r_raw), "departures": getattr(module, "DEPARTURES", None),
            "outputs": [{"path": o.path, "what": o.what} for o in sorted(outs, key=lambda o: o.path)],
            "claims": claims}
     folder = b.out / name

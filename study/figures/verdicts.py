@@ -418,7 +418,8 @@ def coverage_over_datasets(p: pd.DataFrame, dataset: str = "run_id", nominal: fl
     verdict = ("holds" if inside and holds_nominal else
                "does not hold" if not inside and not holds_nominal else "cannot tell")
     width = ((p["ci_high"] - p["ci_low"]) / p["truth"].abs().where(p["truth"] != 0)).median()
-    err = (p["estimate"] - p["truth"]).abs() / p["truth"].abs().where(p["truth"] != 0)
+    err = (p["abs_rel_error"] if "abs_rel_error" in p else
+           (p["estimate"] - p["truth"]).abs() / p["truth"].abs().where(p["truth"] != 0))
     return {"datasets": int(len(g)), "intervals": int(n.sum()), "covered": int(k.sum()), "coverage": cov,
             "cov_low": lo, "cov_high": hi, "all_covered": int(np.sum(k == n)), "none_covered": int(np.sum(k == 0)),
             "median_rel_width": float(width), "median_abs_rel_error": float(err.median()), "verdict": verdict}

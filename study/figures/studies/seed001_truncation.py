@@ -16,6 +16,10 @@ from ._truncation import acted, on_datasets
 
 NAME = "seed001_truncation"
 SEED = "001"
+#: where the study's set-up departs from the paper's, and why
+DEPARTURES = ("Xu & Guedes Soares truncate the LS-SVM of Nomoto models; their 3-5 columns seldom let the L-curve drop "
+              "one, so this study puts the method where truncation acts as it is meant to: hull models with 13-40 "
+              "collinear columns (Abkowitz Mariner, KVLCC2's MMG hull, the waterjet USV), manoeuvres at half length.")
 KEYS = ["cfg_vessel.name", "cfg_model.name", "cfg_noise.name", "cfg_seed", "cfg_structure.name", "m_sample_dt_LU"]
 CLAIM = ("the truncated LS-SVM improves the estimates under noise against least squares, LS-SVM and nu-SVR, where its "
          "truncation acts (hull models with many collinear columns)")

@@ -20,7 +20,10 @@ from study.store import ResultStore
 
 FAST = {"emcee": ["estimator.params.target_ess=150", "estimator.params.min_tau_multiple=10",
                   "estimator.params.max_steps=3000", "estimator.params.init=local"],
-        "de": ["estimator.params.maxiter=60"]}
+        "de": ["estimator.params.maxiter=60"],
+        # one stage over every record: the app's path, with the accuracy check below; the staging itself (Zou et
+        # al.'s steps, biased on this ship by design) is tested in tests/test_staged_de.py
+        "de_staged": ["estimator.params.maxiter=60", "estimator.params.stages=[{records:[0,1,2]}]"]}
 
 
 def _conf(tmp_path, overrides):

@@ -79,6 +79,7 @@ def test_paired_dataset_counts_match_claims(study, a, b, method_col, floor, rela
     assert rows, f"{study}: no row in CLAIMS.md"
     for model, g in runs.groupby("cfg_model.name"):
         keys = ["cfg_vessel.name", "cfg_noise.name", "m_sample_dt_LU", "replicate"]
+        keys += [k for k in ("cfg_maneuvers.name",) if k in g and g[k].nunique() > 1]
         per = _per_dataset(g, params[params["run_id"].isin(g["run_id"])], method_col, keys, relabel)
         w, l, t, n = _counts(per[a], per[b], floor)
         text = f"({w} wins, {l} losses, {t} ties of {n} datasets"

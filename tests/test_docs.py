@@ -137,14 +137,13 @@ def _paper(cell: str) -> str:
     return m.group(1) if m else cell
 
 
-def test_the_studies_page_claims_table_matches_claims_md():
-    """Every claim of paper_figs/CLAIMS.md stands in the studies page's table with the same paper, claim and
-    verdict, in the same order, and nothing else."""
-    claims = [(_paper(a), b, c) for a, b, c in _claim_rows((ROOT / "paper_figs" / "CLAIMS.md").read_text(), 3)]
+def test_the_studies_page_does_not_copy_the_verdicts():
+    """The verdicts are written in one place, paper_figs/CLAIMS.md (rebuilt with the figures); the studies page
+    points to it instead of a copy that would go stale."""
     page = STUDIES_PAGE.read_text(encoding="utf-8")
     sec = page[page.index("## The papers' claims, tested"):]
     sec = sec[:sec.index("\n## ", 1)]
-    assert claims and _claim_rows(sec, 2) == claims
+    assert "paper_figs/CLAIMS.md" in sec and not _claim_rows(sec, 2)
 
 
 def test_the_claims_check_can_fail():

@@ -30,7 +30,7 @@ OKABE_ITO = ["#E69F00", "#56B4E9", "#009E73", "#F0E442", "#0072B2", "#D55E00", "
 #: posterior bands and truth lines of the emcee figures
 OKABE_BLUE = "#0072B2"
 
-#: estimator -> (colour, marker), the same in every figure. Twelve colours drawn from matplotlib's tab10 and tab20,
+#: estimator -> (colour, marker), the same in every figure. Thirteen colours drawn from matplotlib's tab10 and tab20,
 #: Okabe & Ito's set and Tol's muted and vibrant schemes, chosen so that any two are at least 20 apart in CIEDE2000
 #: (G. Sharma, W. Wu, E. N. Dalal, "The CIEDE2000 color-difference formula", Color Res. Appl. 30, 2005) and every
 #: one has a CIE lightness L* of 30-72: no near-black line beside the black truth, no pale line on white, and no
@@ -48,6 +48,7 @@ ESTIMATOR_STYLE = {
     "svr_nu": ("#882255", "P"),        # Tol muted wine
     "sindy": ("#9467BD", "X"),         # tab10 purple
     "de": ("#E69F00", "*"),            # Okabe-Ito orange
+    "de_staged": ("#665500", "d"),     # dark ochre, DE's family (searched for: at least 25 from every other colour)
     "emcee": ("#8C564B", "h"),         # tab10 brown
     "map": ("#D55E00", "p"),           # Okabe-Ito vermillion
 }

@@ -1,4 +1,4 @@
-"""Xu & Guedes Soares (seed 001): the truncated LS-SVM against least squares, LS-SVM and nu-SVR where truncation can act
+"""Xu & Guedes Soares: the truncated LS-SVM against least squares, LS-SVM and nu-SVR where truncation can act
 as the paper intends: hull models with many collinear columns (the Abkowitz Mariner, the MMG hull of KVLCC2, the
 waterjet USV's full model), noisy records.
 

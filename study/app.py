@@ -259,7 +259,7 @@ def _run(cfg: DictConfig) -> dict:
         print(_key_numbers(records, store.root, on_records=data is not None,
                           drawn=distinct_datasets(conf, 2) > 1), flush=True)
     failed = [r for r in records if r.get("status") == "failed"]
-    if failed and not _in_sweep():  # a sweep goes on; it ends with its count of failed runs (sweep_finished)
+    if failed and not _in_sweep():  # a sweep goes on; it ends with its count of failed runs (cli.sweep_finished)
         fail(EXIT_FAILED)
     return records[0] if n == 1 else _job_summary(records)
 
@@ -338,20 +338,6 @@ def _reason(record: dict) -> str:
     """A skipped run's reason, or a failed run's error (the last line of its traceback)."""
     lines = str(record.get("error") or "").strip().splitlines()
     return lines[-1].strip() if lines else "(no reason recorded)"
-
-
-def sweep_finished(returns: list) -> None:
-    """After a sweep (called by the sweeper with every job's return): one line counting the jobs by status, and
-    a non-zero exit status when a run failed or a job ended in an error (each was reported when it happened)."""
-    counts: dict = {}
-    for r in returns:
-        st = r.get("status", "?") if isinstance(r, dict) else "error"
-        counts[st] = counts.get(st, 0) + 1
-    bad = counts.get("failed", 0) + counts.get("error", 0)
-    print(f"[study] sweep finished: {len(returns)} jobs, " + ", ".join(f"{v} {k}" for k, v in sorted(counts.items()))
-          + (f"; exit status {EXIT_FAILED}: {bad} run(s) failed or ended in an error" if bad else ""), flush=True)
-    if bad:
-        fail(EXIT_FAILED)
 
 
 if __name__ == "__main__":

@@ -16,9 +16,9 @@ from __future__ import annotations
 import math
 
 import pandas as pd
-from scipy import stats
 
-from ..plots import Builder, _first, _order, emcee_figures, NOISE_ORDER, STRUCTURE_ORDER
+from ..plots import Builder, _first, _order, NOISE_ORDER, STRUCTURE_ORDER
+from ..posterior_plots import emcee_figures
 from ..verdicts import coverage_over_datasets, describe_coverage, settle
 
 NAME = "emcee_kt"

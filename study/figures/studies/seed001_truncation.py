@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from ..plots import Builder, fit_time_figure, paired_datasets_figure, sampling_label
+from ..claim_plots import paired_datasets_figure
+from ..plots import Builder, fit_time_figure, sampling_label
 from ..verdicts import dataset_errors, dataset_sensitivity, dataset_verdict, summary, tidy_sensitivity
 from ._truncation import acted, on_datasets
 

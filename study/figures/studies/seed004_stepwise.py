@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import pandas as pd
 
-from ..plots import Builder, finest, fit_time_figure, paired_datasets_figure, sampling_label
+from ..claim_plots import paired_datasets_figure
+from ..plots import Builder, finest, fit_time_figure, sampling_label
 from ..verdicts import (dataset_errors, dataset_sensitivity, dataset_verdict, label_invariant, summary,
                         tidy_sensitivity)
 

@@ -6,9 +6,10 @@ from __future__ import annotations
 
 import json
 
+from ..posterior_plots import emcee_figures
 from ..plots import (
     NOISE_ORDER, STRUCTURE_ORDER, _order, Builder, _first, drift_heatmaps, fit_time_figure, collinearity_tables,
-    vif_table, correlation_figure, validation_figure, rmse_cc_table, lcurve_figure, convergence_figure, emcee_figures,
+    vif_table, correlation_figure, validation_figure, rmse_cc_table, lcurve_figure, convergence_figure,
     estimator_style, sampling_label,
 )
 

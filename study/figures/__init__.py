@@ -216,7 +216,8 @@ def build_study(b: Builder, module, runs_raw, params_raw, table: bool = True) ->
     runs, params = prepare_tables(r_raw, p_raw)
     first, claims = len(b.written), []
     b.read = set()
-    b.all_runs = r_raw  # with the failed ones, which claims count as losses
+    # with the failed ones, which claims count as losses
+    b.all_runs = r_raw if "replicate" in r_raw or not len(r_raw) else r_raw.assign(replicate=0)
     module.build(b, runs, params, claims)
     outs = b.written[first:]
     idx = {"study": name, "runs": int(len(runs)), "code": code_status(r_raw),

@@ -137,10 +137,12 @@ def prepare_tables(runs: pd.DataFrame, params: pd.DataFrame) -> tuple[pd.DataFra
     runs = runs[runs["status"] == "ok"].copy()
     if "cfg_study" not in runs:
         runs["cfg_study"] = None
-    keep = [c for c in ("run_id", "cfg_study", "cfg_noise.name", "cfg_depth.h_T", "cfg_vessel.operation.U0",
+    if "replicate" not in runs:  # a table of runs made before replicates: each run is replicate 0
+        runs["replicate"] = 0
+    keep = [c for c in ("run_id", "replicate", "cfg_study", "cfg_noise.name", "cfg_depth.h_T", "cfg_vessel.operation.U0",
                         "cfg_maneuvers.name", "cfg_seed", "cfg_vessel.particulars.Lpp", "cfg_case.name",
                         "m_sample_dt", "m_sample_dt_LU", "cfg_noise.sample_dt_LU") if c in runs]
-    p = params.drop(columns=[c for c in params.columns if c.startswith("cfg_") and c in keep], errors="ignore")
+    p = params.drop(columns=[c for c in params.columns if c in keep and c != "run_id"], errors="ignore")
     p = p.merge(runs[keep], on="run_id", how="inner")
     p["abs_rel_error"] = p["rel_error"].abs()
     for c in ("scaled_error", "term_scale", "m_sample_dt", "m_sample_dt_LU"):  # tables written before they existed

@@ -5,14 +5,12 @@ against central differences of the heading.
 ``claims``; ``python -m study.figures`` finds this module by the study's name (``conf/experiment/seed004_kt_de.yaml``)."""
 from __future__ import annotations
 
-import numpy as np
 import pandas as pd
 
-from ..plots import (
-    PRINT_WIDTH_IN, _plt, _wrap, Builder, _first, finest, fit_time_figure, log_ticks, sampling_label, structure_style,
-    validation_figure,
-)
-from ..verdicts import dataset_sensitivity, dataset_verdict, label_invariant, summary, tidy_sensitivity
+from ..plots import Builder, _first, finest, fit_time_figure, sampling_label, structure_style, validation_figure
+from ..claim_plots import paired_datasets_figure
+from ..verdicts import (dataset_errors, dataset_sensitivity, dataset_verdict, label_invariant, summary,
+                        tidy_sensitivity)
 
 NAME = "seed004_kt_de"
 SEED = "004"  # the seed paper whose claim it tests: a "not run" row in CLAIMS.md until it has run
@@ -26,64 +24,44 @@ DEPARTURES = ("Zheng & Xiao identify from ship-model tests (not public); the exa
 def build(b: Builder, runs, params, claims):
     s = "seed004_kt_de"
     r, p = runs[runs["cfg_study"] == s], params[params["cfg_study"] == s]
-    plt = _plt()
     pf = finest(p)[0]  # the figure at the finest sampling interval; the claim's table has the others
     dt_s = pf["m_sample_dt"].dropna()
     at = f" (sampled at {dt_s.iloc[0]:g} s)" if len(dt_s) else ""  # the outputs' captions, as before
     sub = sampling_label(pf)
-    tab = (pf.groupby(["cfg_vessel.name", "cfg_model.name", "cfg_maneuvers.name", "cfg_noise.name",
-                       "cfg_structure.name"])["abs_rel_error"].max().unstack("cfg_structure.name").reset_index())
+    # each fit's largest error, then the median over the datasets of a set-up (one dataset where nothing is drawn)
+    worst = (pf.assign(dataset=pf.get("replicate", 0)).groupby(
+        ["cfg_vessel.name", "cfg_model.name", "cfg_noise.name", "cfg_structure.name", "run_id"])["abs_rel_error"].max()
+        .reset_index())
+    tab = (worst.groupby(["cfg_vessel.name", "cfg_model.name", "cfg_noise.name", "cfg_structure.name"])
+           ["abs_rel_error"].agg(["median", "size"]).unstack("cfg_structure.name"))
     if len(tab):
-        tab.columns.name = None
-        b.table(tab.rename(columns={"cfg_vessel.name": "vessel", "cfg_model.name": "model",
-                                    "cfg_maneuvers.name": "records", "cfg_noise.name": "noise"}), s,
-                "difference_vs_integral", "largest |relative error| of the KT parameters: DE by output error on the "
-                f"heading ('integral') against central differences of the heading{at}")
-        kinds = pf.groupby(["cfg_vessel.name", "cfg_model.name"])["truth_kind"].first()
-        models = [m for m in ("nomoto1_nl", "nomoto2_nl") if m in set(tab["cfg_model.name"])]
-        fig, axes = plt.subplots(len(models), 1, figsize=(PRINT_WIDTH_IN, 3.3 * len(models) + 0.8), squeeze=False,
-                                 layout="constrained")
-        from matplotlib.transforms import blended_transform_factory
-
-        for ax, model in zip(axes[:, 0], models):
-            d = tab[tab["cfg_model.name"] == model]
-            labels = [f"{'1 record' if m.endswith('_single') else '2 records'}, {n}"
-                      for m, n in zip(d["cfg_maneuvers.name"], d["cfg_noise.name"])]
-            x = np.arange(len(d))
-            for k, st in enumerate(("central", "output_error")):
-                if st in d:
-                    sty = structure_style(st)
-                    ax.bar(x + 0.4 * k, d[st].to_numpy(float), width=0.4, label=st, color=sty["color"],
-                           hatch=sty["hatch"], edgecolor="black", linewidth=0.5)
-            ax.set_xticks(x + 0.2, labels, rotation=90)
-            ax.set_yscale("log")
-            log_ticks(ax)
-            ax.set_ylabel("largest |relative error| [-]")
-            ax.set_xlabel("records and noise level")
-            ax.set_title(f"{model}", pad=16)
-            tr = blended_transform_factory(ax.transData, ax.transAxes)
-            vessels = list(dict.fromkeys(d["cfg_vessel.name"]))
-            for v in vessels:
-                idx = np.flatnonzero(d["cfg_vessel.name"].to_numpy() == v)
-                ax.text(idx.mean() + 0.2, 1.01, f"{v} ({kinds.get((v, model), '?')} truth)", transform=tr,
-                        ha="center", va="bottom", fontsize=8)
-                if idx[0] > 0:
-                    ax.axvline(idx[0] - 0.3, color="grey", lw=0.8)
-        axes[0, 0].legend(title="sample structure", loc="upper left", bbox_to_anchor=(1.01, 1.0))
-        fig.suptitle(_wrap("Zheng & Xiao 2017: the KT parameters by DE, output error on the heading against central "
-                           f"differences of it ({sub})"))
-        b.figure(fig, s, "difference_vs_integral", "Zheng & Xiao 2017: KT parameters by DE, output error against central "
-                 f"differences, per vessel, records (x1/x2) and noise{at}")
+        tab.columns = [f"{st} {'median largest error' if k == 'median' else 'datasets'}" for k, st in tab.columns]
+        b.table(tab.reset_index().rename(columns={"cfg_vessel.name": "vessel", "cfg_model.name": "model",
+                                                  "cfg_noise.name": "noise"}), s,
+                "difference_vs_integral", "largest |relative error| of the KT parameters per fit, median over the "
+                "datasets: DE by output error on the heading ('integral') against central differences of the "
+                f"heading{at}", floatfmt=".3g")
+        runs_all = b.all_runs if b.all_runs is not None else r
+        panels = []
+        for (v, m, kind), d in label_invariant(pf, [("T1", "T2")]).groupby(
+                ["cfg_vessel.name", "cfg_model.name", "truth_kind"]):
+            d = d[d["cfg_noise.name"] != "none"]
+            rr = finest(runs_all[(runs_all["cfg_vessel.name"] == v) & (runs_all["cfg_model.name"] == m)])[0]
+            e = dataset_errors(d, "cfg_structure.name", KEYS + ["replicate"], runs=rr[rr["cfg_noise.name"] != "none"])
+            panels.append((f"{v}, {m} ({kind} truth)", e))
+        paired_datasets_figure(b, s, panels, "output_error", "central", "difference_vs_integral",
+                               f"Zheng & Xiao 2017: output error on the heading against central differences of it, "
+                               f"noisy records, {sub}", f"Zheng & Xiao 2017 (noisy records, {sub})")
     ent = []
     rf = finest(r)[0]
     for st in ("output_error", "central"):
         run = _first(rf, **{"cfg_vessel.name": "mariner", "cfg_model.name": "nomoto1_nl", "cfg_structure.name": st,
-                           "cfg_maneuvers.name": "seed004", "cfg_noise.name": "low"})
+                           "cfg_noise.name": "low_relative"})
         if run is not None:
             ent.append((f"DE, {st}", run["run_id"], structure_style(st)))
     validation_figure(b, s, ent, "zigzag_35_35", "validation_zigzag_35_35", "Zheng & Xiao 2017 Fig. 3: the 35/35 zigzag of the "
                       f"Abkowitz Mariner predicted by nonlinear KT models identified by DE{at}",
-                      setup=f"Abkowitz Mariner, nomoto1_nl, 2 records, noise low, {sampling_label(rf)}")
+                      setup=f"Abkowitz Mariner, nomoto1_nl, 2 records, noise low_relative, {sampling_label(rf)}")
     fit_time_figure(b, r, s)
     claims.extend(claim(b, r, p))
 

@@ -224,3 +224,10 @@ def test_the_committed_paper_figs_rebuild_from_their_tables_to_the_same_bytes(tm
     assert sorted(after) == sorted(before)
     changed = sorted(k for k in before if before[k] != after[k])
     assert not changed, changed
+
+
+def test_an_unknown_study_is_refused_before_anything_is_written(tmp_path):
+    out = tmp_path / "figs"
+    r = subprocess.run([sys.executable, "-m", "study.figures", "--study", "nope", "--out", str(out)],
+                       capture_output=True, text=True, cwd=REPO)
+    assert r.returncode == 2 and "--study nope: no such study" in r.stderr and not out.exists()

@@ -292,10 +292,10 @@ def generic_figures(b: Builder, runs, params, named: set, results: Path) -> None
             print(f"study.figures: {line}")
 
 
-def build(results: Path | None, out: Path, table: bool = True) -> Builder:
+def build(results: Path | None, out: Path, table: bool = True, only: set | None = None) -> Builder:
     """Rebuild the outputs of every study found in the results table (``results``; None: the study tables
-    committed under ``out``); compose README.md and CLAIMS.md from every study's index in ``out`` (rebuilt now
-    or before)."""
+    committed under ``out``), or of the studies in ``only``; compose README.md and CLAIMS.md from every study's
+    index in ``out`` (rebuilt now or before)."""
     from ..store import ResultStore
     from .studies import discover
 
@@ -309,6 +309,8 @@ def build(results: Path | None, out: Path, table: bool = True) -> Builder:
             runs["cfg_study"] = None
         present = set(runs.loc[runs["status"] == "ok", "cfg_study"].dropna()) if len(runs) else set()
         sources = {n: (runs, params, None) for n in present}
+    if only is not None:
+        sources = {n: s for n, s in sources.items() if n in only}
     out.mkdir(parents=True, exist_ok=True)
     b = Builder(out if results is None else Path(results), out)
     for name in sorted(set(sources) - set(studies)):
@@ -319,7 +321,7 @@ def build(results: Path | None, out: Path, table: bool = True) -> Builder:
             runs, params, root = sources[name]
             b.artefact_roots = [root] if root is not None else []
             build_study(b, mod, runs, params, table=table)
-    if results is not None:  # runs no named study claims: the generic comparison of whatever the sweep varied
+    if results is not None and only is None:  # runs no named study claims: the generic comparison of the sweep
         generic_figures(b, runs, params, set(studies), Path(results))
     indexes = read_indexes(out)
     not_built = [n for n in studies if n not in indexes]
@@ -335,8 +337,19 @@ def main(argv=None) -> int:
                     "it holds a table, else the study tables committed under the output folder)")
     ap.add_argument("--out", default=str(REPO / "paper_figs"), help="output folder (default paper_figs/)")
     ap.add_argument("--no-table", action="store_true", help="do not write the studies' tables into the output")
+    ap.add_argument("--study", action="append", default=None, metavar="NAME",
+                    help="rebuild only this study (repeatable; default: every study the table holds); the others' "
+                         "outputs stay as they are")
     args = ap.parse_args(argv)
     out = Path(args.out)
+    if args.study:
+        from .studies import discover
+
+        unknown = sorted(set(args.study) - set(discover()))
+        if unknown:
+            print(f"study.figures: error: --study {', '.join(unknown)}: no such study; expected one of "
+                  f"{', '.join(sorted(discover()))}", file=sys.stderr)
+            return 2
 
     def has_table(d: Path) -> bool:
         return (d / "records").is_dir() or (d / "runs.parquet").exists()
@@ -359,6 +372,6 @@ def main(argv=None) -> int:
               f"in {out.resolve()}; expected a results folder (run a study first: python -m study -m "
               "experiment=smoke)", file=sys.stderr)
         return 2
-    b = build(results, out, table=not args.no_table)
+    b = build(results, out, table=not args.no_table, only=set(args.study) if args.study else None)
     print(f"{len(b.written)} outputs in {Path(args.out).resolve()}; claims in {Path(args.out) / 'CLAIMS.md'}")
     return 0

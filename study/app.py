@@ -259,7 +259,7 @@ def _run(cfg: DictConfig) -> dict:
         print(_key_numbers(records, store.root, on_records=data is not None,
                           drawn=distinct_datasets(conf, 2) > 1), flush=True)
     failed = [r for r in records if r.get("status") == "failed"]
-    if failed and not _in_sweep():  # a sweep goes on; it ends with its count of failed runs (cli.sweep_finished)
+    if failed and not _in_sweep():  # a sweep goes on; it ends with its count of failed runs (sweep_summary.sweep_finished)
         fail(EXIT_FAILED)
     return records[0] if n == 1 else _job_summary(records)
 

@@ -341,17 +341,3 @@ def run(main, prog: str, argv: list | None = None):
 def status() -> int:
     """The exit status asked for so far."""
     return _status["code"]
-
-
-def sweep_finished(returns: list) -> None:
-    """After a sweep (called by the sweeper with every job's return): one line counting the jobs by status, and
-    a non-zero exit status when a run failed or a job ended in an error (each was reported when it happened)."""
-    counts: dict = {}
-    for r in returns:
-        st = r.get("status", "?") if isinstance(r, dict) else "error"
-        counts[st] = counts.get(st, 0) + 1
-    bad = counts.get("failed", 0) + counts.get("error", 0)
-    print(f"[study] sweep finished: {len(returns)} jobs, " + ", ".join(f"{v} {k}" for k, v in sorted(counts.items()))
-          + (f"; exit status {EXIT_FAILED}: {bad} run(s) failed or ended in an error" if bad else ""), flush=True)
-    if bad:
-        fail(EXIT_FAILED)

@@ -13,7 +13,7 @@ Hydra's behaviour. Hydra only loads sweepers from the `hydra_plugins` namespace 
 Each composed config is also checked by the study's own rules (`study.settings.check_run`: zero, negative or
 non-finite values, unknown estimator hyper-parameters), so such a sweep is refused before any job runs. The
 sweep's number of jobs is exported (`STUDY_SWEEP_JOBS`) for the progress lines (`job 12/66`), and when the
-sweep ends `study.cli.sweep_finished` counts its jobs by status (a failed run makes the command's exit status
+sweep ends `study.sweep_summary.sweep_finished` counts its jobs by status (a failed run makes the command's exit status
 non-zero).
 """
 # no `from __future__ import annotations`: Hydra execs plugin modules outside sys.modules, and dataclasses
@@ -99,7 +99,7 @@ class CoveringSweeper(BasicSweeper):
         self._checked = True
         returns = super().sweep(arguments)
         try:
-            from study.cli import sweep_finished
+            from study.sweep_summary import sweep_finished
         except ImportError:
             return returns
         sweep_finished([r.return_value for batch in returns for r in batch])

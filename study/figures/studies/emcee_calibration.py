@@ -101,7 +101,7 @@ def _per_coefficient_figure(b: Builder, per: pd.DataFrame):
         ax.axhline(0.9, color="grey", lw=0.8, ls="--")
         err = np.vstack([d["coverage"] - d["cov_low"], d["cov_high"] - d["coverage"]]).clip(min=0)
         ax.errorbar(x, d["coverage"], yerr=err, fmt="o", color="black", ms=4, lw=0.8)
-        ax.set_xticks(x, d["coefficient"], rotation=60, fontsize=7)
+        ax.set_xticks(x, d["coefficient"], rotation=60, fontsize=8)
         ax.set_xlabel("coefficient")
         ax.set_ylim(0, 1.02)
         ax.set_ylabel("coverage [-]")
@@ -128,7 +128,7 @@ def _trust_figure(b: Builder, cov: pd.DataFrame):
             q = dm[dm["runs"] == who]
             xs = [conds.index(c) + (j - 0.5) * 0.25 for c in q["condition"]]
             ax.scatter(xs, q["coverage"], marker=mk, color=col, s=18, label=f"{who} runs")
-        ax.set_xticks(range(len(conds)), conds, rotation=45, ha="right", fontsize=7)
+        ax.set_xticks(range(len(conds)), conds, rotation=45, ha="right", fontsize=8)
         ax.set_xlabel("condition")
         ax.set_ylim(0, 1.02)
         ax.set_title(m, fontsize=9)

@@ -42,7 +42,7 @@ def paired_datasets_figure(b: Builder, study: str, panels: list, a: str, b_: str
         ax.scatter(xs[~failed], ys[~failed], s=12, color="black", alpha=0.7, lw=0)
         if failed.any():
             ax.scatter(xs[failed], ys[failed], s=22, marker="x", color="tab:red", label="a fit failed")
-            ax.legend(loc="lower right", fontsize=7)
+            ax.legend(loc="lower right", fontsize=8)
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlim(lo, hi)

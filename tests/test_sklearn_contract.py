@@ -10,11 +10,15 @@ from study.config import read_config
 from study.identify.estimators import list_estimators, make_estimator
 
 
+#: short chains for the sampler: the checks are of the API (clone, shapes, refusals), not of the posterior
+FAST = {"emcee": {"target_ess": 100, "min_tau_multiple": 10, "max_steps": 1000}}
+
+
 @pytest.mark.parametrize("name", list_estimators())
 def test_the_estimator_passes_scikit_learns_checks(name):
     from sklearn.utils.estimator_checks import check_estimator
 
-    est = make_estimator(read_config("estimator", name))
+    est = make_estimator(read_config("estimator", name), **FAST.get(name, {}))
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         results = check_estimator(est, on_fail=None)

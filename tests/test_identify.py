@@ -139,8 +139,21 @@ def _cases():
                 # asserted in test_sindy_library_absorbs_truncation_error, not a recovery case
                 if (e, m, s) == ("sindy", "usv_full", "central"):
                     continue
-                out.append((e, m, s))
+                out.append((e, m, s) if _default_tier(e, m, s) else pytest.param(e, m, s, marks=pytest.mark.slow))
     return out
+
+
+#: the estimators whose noise-free recovery takes seconds on a large model (sampling, a sparse library's sweeps)
+_HEAVY = ("emcee", "sindy")
+
+
+def _default_tier(estimator: str, model: str, structure: str) -> bool:
+    """The default tier keeps every structure by least squares and every estimator on central rows (the heavy ones
+    on the small models); the whole cross runs in the slow tier."""
+    if estimator == "ls":
+        return True
+    return structure == "central" and (estimator not in _HEAVY or model in ("nomoto1_nl", "nomoto2_nl",
+                                                                            "mmg_simplified"))
 
 
 def test_every_model_config_has_an_exact_test_vessel():

@@ -102,8 +102,9 @@ def write_claims(out: Path, indexes: dict, not_built: list, seeds: dict) -> None
              "interval; a *cannot tell* names the smallest ratio its datasets could have detected with 80 % power, "
              "so that \"no difference\" and \"too few data\" read differently. A set-up where nothing is drawn at "
              "random (no noise, no random manoeuvre) is one dataset, said so. Coverage claims resample whole "
-             "datasets (their coefficients miss together); properties of each dataset (settling, term selection) "
-             "count datasets with a Wilson interval.", "",
+             "datasets (their coefficients miss together) and call 80-97 % \"about 90 %\", saying beside it when "
+             "the interval lies below or above 90 %; properties of each dataset (settling, term selection) count "
+             "datasets with a Wilson interval.", "",
              "**Every choice that flips a verdict is named** (*depends on the choice*). Each study's "
              "`claim_sensitivity` table repeats every comparison with ties within 1 % and 10 %, without the floor "
              "and with ten times it, the per-dataset mean instead of the median, the coefficients as the unit (not "

@@ -397,9 +397,10 @@ def coverage_over_datasets(p: pd.DataFrame, dataset: str = "run_id", nominal: fl
     """Coverage of the truth by the intervals (``ci_low``, ``ci_high``) of ``p``'s rows, the dataset (``dataset``:
     one run is one dataset) as the unit: the share of intervals that hold the truth, with its 95 % percentile
     bootstrap interval over datasets (the coefficients of one fit miss together, so they are resampled together),
-    how the misses fall (datasets that miss none, every one, of their coefficients) and the verdict: **holds** when
-    the coverage is inside ``band`` and its interval holds ``nominal``; **does not hold** when it is outside the band
-    and its interval excludes ``nominal``; **cannot tell** otherwise."""
+    how the misses fall (datasets that miss none, every one, of their coefficients) and the verdict on "about
+    ``nominal``": **holds** when the coverage is inside ``band``; **does not hold** when its interval lies wholly
+    outside the band; **cannot tell** otherwise. ``vs_nominal`` says whether the interval lies below or above
+    ``nominal`` (intervals measurably too narrow or too wide, though perhaps inside the band)."""
     if not len(p):
         return {"datasets": 0, "intervals": 0, "covered": 0, "coverage": math.nan, "cov_low": math.nan,
                 "cov_high": math.nan, "verdict": "not run"}
@@ -414,15 +415,18 @@ def coverage_over_datasets(p: pd.DataFrame, dataset: str = "run_id", nominal: fl
         lo, hi = (float(x) for x in np.quantile(boot, [0.025, 0.975]))
     else:
         lo, hi = 0.0, 1.0  # one dataset: its coefficients are one draw
-    inside, holds_nominal = band[0] <= cov <= band[1], lo <= nominal <= hi
-    verdict = ("holds" if inside and holds_nominal else
-               "does not hold" if not inside and not holds_nominal else "cannot tell")
+    # "about 90 %" is the band: in it, the claim holds; its interval wholly outside, it does not; else cannot tell.
+    # Whether the interval excludes the nominal level is said beside it (intervals measurably too narrow or wide)
+    verdict = ("holds" if band[0] <= cov <= band[1] else
+               "does not hold" if (hi < band[0] or lo > band[1]) else "cannot tell")
+    nominal_side = "below" if hi < nominal else ("above" if lo > nominal else "consistent")
     width = ((p["ci_high"] - p["ci_low"]) / p["truth"].abs().where(p["truth"] != 0)).median()
     err = (p["abs_rel_error"] if "abs_rel_error" in p else
            (p["estimate"] - p["truth"]).abs() / p["truth"].abs().where(p["truth"] != 0))
     return {"datasets": int(len(g)), "intervals": int(n.sum()), "covered": int(k.sum()), "coverage": cov,
             "cov_low": lo, "cov_high": hi, "all_covered": int(np.sum(k == n)), "none_covered": int(np.sum(k == 0)),
-            "median_rel_width": float(width), "median_abs_rel_error": float(err.median()), "verdict": verdict}
+            "median_rel_width": float(width), "median_abs_rel_error": float(err.median()), "verdict": verdict,
+            "vs_nominal": nominal_side}
 
 
 def describe_coverage(c: dict) -> str:
@@ -432,4 +436,6 @@ def describe_coverage(c: dict) -> str:
     return (f"{int(c['covered'])}/{int(c['intervals'])} intervals of {int(c['datasets'])} datasets covered "
             f"({100 * c['coverage']:.0f} %, 95 % over datasets {100 * c['cov_low']:.0f}-{100 * c['cov_high']:.0f} %; "
             f"datasets missing every coefficient {int(c['none_covered'])}, none {int(c['all_covered'])}; median width "
-            f"{100 * c['median_rel_width']:.3g} % of the truth, median error {100 * c['median_abs_rel_error']:.2g} %)")
+            f"{100 * c['median_rel_width']:.3g} % of the truth, median error {100 * c['median_abs_rel_error']:.2g} %"
+            + {"below": "; below 90 % beyond chance", "above": "; above 90 % beyond chance"}.get(
+                c.get("vs_nominal"), "") + ")")

@@ -6,9 +6,9 @@
 How a calibration verdict is decided: over the datasets (seeds) of one set-up, each coefficient's 90 % interval
 either holds the truth or not. The coverage (the share of intervals that hold it) comes with a 95 % bootstrap
 interval over datasets: the intervals of one dataset miss together, so they are resampled together
-(:func:`study.figures.verdicts.coverage_over_datasets`). **holds** when the coverage lies in the band 80-97 % and
-its interval holds 0.9; **does not hold** when it lies outside the band and its interval excludes 0.9; **cannot
-tell** otherwise (too few datasets to tell). Each claim is
+(:func:`study.figures.verdicts.coverage_over_datasets`). "About 90 %" is the band 80-97 %: **holds** when the
+coverage lies in it; **does not hold** when its interval lies wholly outside it; **cannot tell** otherwise (too few
+datasets to tell). Whether the interval lies below or above 90 % is said beside the verdict. Each claim is
 then restated under every other set-up of the sweep (noise definition, sampling interval): a verdict that changes
 says "depends on ..."."""
 from __future__ import annotations

@@ -116,8 +116,11 @@ def write_claims(out: Path, indexes: dict, not_built: list, seeds: dict) -> None
              "| seed | claim | study | verdict | numbers |", "|---|---|---|---|---|"]
     claims = sorted((c for idx in indexes.values() for c in idx.get("claims") or []),
                     key=lambda c: _claim_key(c, seeds))
+    stale = {name for name, idx in indexes.items() if (idx.get("code") or {}).get("stale")}
     for c in claims:
         mark = " (*earlier scoring*)" if c.get("rule") == "share" else ""
+        if c.get("study") in stale:  # its runs were computed by code that has changed since: not to be read yet
+            mark += " (*stale runs: re-run pending*)"
         lines.append(f"| {c['seed']} | {_cell(c['claim'])} | `{c['study']}` | **{c['verdict']}**{mark} | "
                      f"{_cell(c['numbers'])} |")
     for m in sorted((m for m in not_built if seeds.get(m)), key=lambda m: seeds[m]):
@@ -197,7 +200,7 @@ def datasets_per_cell(runs: pd.DataFrame) -> dict:
     """How many datasets each configuration (cell) of a study's table holds: the smallest and largest over the cells
     where something is drawn at random (measurement noise), and how many cells are one dataset by construction (no
     noise: every replicate would be the same records)."""
-    cfg = [c for c in runs.columns if c.startswith("cfg_")]
+    cfg = [c for c in runs.columns if c.startswith("cfg_") and c != "cfg_seed"]  # a seed sweep is datasets too
     if not len(runs) or not cfg:
         return {}
     n = runs[cfg].astype(str).groupby(cfg, dropna=False).size()

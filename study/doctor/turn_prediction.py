@@ -35,7 +35,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .. import metrics as M
+
+from .predictions import default_alternatives, predict_turn, setup_effects_left_out, turn_vessel  # noqa: F401
 
 __all__ = ["predict_turn", "kvlcc2_hsva_table"]
 
@@ -44,81 +45,6 @@ COMMITTED = Path(__file__).resolve().parents[2] / "paper_figs" / "doctor"
 #: the default output: a folder of the current directory, never a committed one
 DEFAULT_OUT = Path("turn_prediction")
 FILES = ("kvlcc2_turn_from_zigzags.csv", "kvlcc2_turn_from_zigzags.md")
-
-
-def _turn(df: pd.DataFrame, L: float) -> tuple[float, float]:
-    try:
-        m = M.turning_metrics(df, L=L)
-        return float(m["tactical_diameter_L"]), float(m["advance_L"])
-    except (ValueError, KeyError, IndexError):  # never reached 180 deg, or diverged
-        return float("nan"), float("nan")
-
-
-def setup_effects_left_out(problem, fit, facility: str | None = None, scale: str | None = None,
-                           keep_setup_effects: bool = False) -> tuple:
-    """(``fit`` for a prediction in ``facility`` at ``scale``, the set-up effects left out, why): the set-up effects
-    are left out unless kept, or the prediction's facility and scale are the training records' own."""
-    from ..facility import other_setup, setup_of
-    from .diagnose import without_effects
-
-    drop = [e for e in fit.effects if getattr(problem.effect(e), "setup_effect", False)]
-    if not drop or keep_setup_effects:
-        return fit, [], None
-    training = [setup_of(i.meta, problem.vessel_cfg) for i in problem.infos]
-    if facility is None:
-        why = "the prediction's facility is not stated (a manoeuvre nobody measured: not the training set-up)"
-    else:
-        why = other_setup((facility, scale), training)
-    if why is None:
-        return fit, [], None
-    return without_effects(problem, fit, drop), drop, why
-
-
-def predict_turn(problem, fit, u0: float | None = None, n: float | None = None, draws: int = 64, seed: int = 0,
-                 maneuver: str = "turning_35", level: float = 0.9, facility: str | None = None,
-                 scale: str | None = None, keep_setup_effects: bool = False) -> dict:
-    """Tactical diameter and advance [L] of ``fit``'s model in ``maneuver`` from a steady approach at ``u0``
-    (default: the vessel's U0), with the ``level`` interval of ``draws`` posterior draws (0: none); set-up effects
-    left out for another ``facility`` or ``scale`` unless ``keep_setup_effects`` (see the module's docstring).
-
-    Returns ``{'tactical_diameter_L', 'advance_L', 'td_low', 'td_high', 'td_draws_median', 'n', 'u0',
-    'draws', 'finite_draws', 'setup_left_out', 'setup_why'}``."""
-    from ..sim import simulate, simulate_batch, to_frame
-
-    fit, left_out, why = setup_effects_left_out(problem, fit, facility, scale, keep_setup_effects)
-    L = problem.L
-    u0 = float(problem.U0 if u0 is None else u0)
-    # the effects' constant forces (a yaw bias) are among the linear unknowns: the values are outer and linear
-    # ones together, as EffectsProblem.predict passes them
-    v = problem.vessel(fit.effects, fit.values, coefs=fit.coefs, replay=False)
-    if n is None:
-        if not hasattr(v.kind, "solve_n"):
-            raise ValueError(f"vessel kind '{v.kind_name}' has no propeller to solve for: give n")
-        n = float(v.kind.solve_n(v.params[:len(v.kind.PARAM_NAMES)], u0))
-    v = replace(v, n0=float(n), U0=u0)
-    td, adv = _turn(simulate(v, maneuver, u0=u0), L)
-    out = {"tactical_diameter_L": td, "advance_L": adv, "n": float(n), "u0": u0, "draws": int(draws),
-           "td_low": float("nan"), "td_high": float("nan"), "td_draws_median": float("nan"), "finite_draws": 0,
-           "setup_left_out": list(left_out), "setup_why": why}
-    post = problem.posterior(fit) if draws else None
-    if post is None:
-        return out
-    # draws from N(mean, cov); the covariance of a nearly rank-deficient problem is made positive semidefinite
-    # by clipping its eigenvalues (numpy's multivariate_normal would warn and do the same by SVD)
-    w, V = np.linalg.eigh(post["cov"])
-    z = np.random.default_rng(seed).standard_normal((draws, len(w)))
-    thetas = post["mean"] + (z * np.sqrt(np.clip(w, 0.0, None))) @ V.T
-    P = np.column_stack([problem.vessel(fit.effects, {**fit.outer, **dict(zip(post["names"], th))},
-                                        coefs=dict(zip(post["names"], th)), replay=False).params for th in thetas])
-    t, sims = simulate_batch(v, maneuver, P)
-    tds = np.array([_turn(to_frame(sims, t, b), L)[0] for b in range(draws)])
-    ok = np.isfinite(tds)
-    out["finite_draws"] = int(ok.sum())
-    if ok.sum() >= 2:
-        a = (1.0 - level) / 2.0
-        out.update(td_low=float(np.quantile(tds[ok], a)), td_high=float(np.quantile(tds[ok], 1.0 - a)),
-                   td_draws_median=float(np.median(tds[ok])))
-    return out
 
 
 #: the KVLCC2 cases: (label, anchor, effects); the first identified one is the doctor's default

@@ -49,8 +49,9 @@ def _parts(u: Mapping) -> str:
     for k, name in PARTS:
         x = _finite(u.get(k))
         out.append(f"{name} {100 * x:.1f} %" if x is not None else f"{name} n/a")
-    why = u.get("why")
-    return ", ".join(out) + (f" ({_e(why)})" if why else "")
+    why, caveat = u.get("why"), u.get("caveat")
+    return ", ".join(out) + (f" ({_e(why)})" if why else "") + (f'<br><span class="caveat">{_e(caveat)}</span>'
+                                                                 if caveat else "")
 
 
 def _carriers(cs) -> str:
@@ -148,5 +149,6 @@ table.uncertainty td.parts { font-size: .82rem; color: #333; min-width: 11rem; }
 table.uncertainty ul.carriers { margin: 0; padding-left: 1rem; font-size: .82rem; }
 p.extrapolates { color: #7a0016; font-weight: 600; }
 span.interval { font-size: .8rem; color: #555; }
+span.caveat { color: #8a4b00; }
 """
 

@@ -35,6 +35,9 @@ from . import prediction_interval as pi
 SURROGATE = "rms_yaw_rate"
 #: a record that starts slower than this share of U0 is replayed from where it first reaches it
 START_SPEED_U0 = 0.5
+#: held-out records that reach less than this share of the farthest record's reach do not calibrate (see
+#: :func:`growth_for`)
+MIN_REACH = 0.5
 
 
 def model_cfg_of(problem) -> dict:
@@ -208,6 +211,18 @@ def anchor_variants(problem, fit, factors=(0.5, 2.0)) -> list:
     return out
 
 
+def at_bounds(problem, fit, rel: float = 1e-3) -> list:
+    """The effects' nonlinear parameters of ``fit`` that lie on a bound of their search box (within ``rel`` of
+    its width): their optimum lies outside the range the catalogue holds physical -- an identification that
+    failed, not a model the records support (a wake fraction of 0.7, a depth of 1.1 drafts in a pond)."""
+    out = []
+    for name, lo, hi, _ in problem.outer_params(fit.effects):
+        x = fit.outer.get(name)
+        if isinstance(x, (int, float)) and (abs(x - lo) <= rel * (hi - lo) or abs(x - hi) <= rel * (hi - lo)):
+            out.append(f"{name} = {x:.3g} (bounds {lo:.3g}, {hi:.3g})")
+    return out
+
+
 def data_error(problem, fit) -> float:
     """The fit's misfit of the training rows alone (its training error without the anchor's penalty)."""
     ref = problem.reference()
@@ -230,15 +245,22 @@ def published_set(problem, fit, tie: float = 0.1) -> tuple:
 
 
 # ---------------------------------------------------------------------------------------------- calibration
-def splits(envelopes: list) -> list:
-    """[(label, trained indices, predicted indices)]: the gentler half -> the harsher half, then each record
-    left out in turn (with nearly all the data: the error of a model like the full one, mostly inside the
-    envelope -- the floor -- and outside it for the records that reach furthest). A record's rank is its reach,
-    max over the states of its envelope over all records' (a record with no sample at speed reaches nothing)."""
+def reaches(envelopes: list) -> list:
+    """Each record's reach: the mean over the states of its envelope over all records' (a state it has no sample
+    of counts 0; the mean, not the largest, so that records which all reach the same rudder angle still rank).
+    :func:`calibrate` ranks by the records' envelopes at speed (``START_SPEED_U0``): a weighted quantile does not
+    see that a whole record was run slowly, and a record run slowly is no harsh manoeuvre at speed."""
     keys = list(pi.STATES)
     total = {k: max([e[k] for e in envelopes if np.isfinite(e[k])] or [math.nan]) for k in keys}
-    reach = [max([e[k] / total[k] for k in keys if np.isfinite(e[k]) and total[k] > 0] or [0.0]) for e in envelopes]
-    order = [int(i) for i in np.argsort(reach, kind="stable")]
+    return [float(np.mean([e[k] / total[k] if np.isfinite(e[k]) and total[k] > 0 else 0.0 for k in keys]))
+            for e in envelopes]
+
+
+def splits(envelopes: list) -> list:
+    """[(label, trained indices, predicted indices)]: the gentler half -> the harsher half (by
+    :func:`reaches`), then each record left out in turn (with nearly all the data: the error of a model like the
+    full one, mostly inside the envelope -- the floor -- and outside it for the records that reach furthest)."""
+    order = [int(i) for i in np.argsort(reaches(envelopes), kind="stable")]
     n = len(order)
     if n < 2:
         return []
@@ -251,7 +273,9 @@ def calibrate(problem, fit) -> dict:
     """The held-out pairs of :func:`splits` (see the module docstring): ``{'pairs': [{record, split,
     distance, state, errors: {metric: |log error|}}], 'envelope': the training envelope, 'splits', 'notes'}``."""
     L, U0 = problem.L, problem.U0
-    envs = [pi.state_envelope(df, L, U0) for df in problem.records]
+    envs = [pi.state_envelope(df, L, U0, min_speed=START_SPEED_U0) for df in problem.records]
+    reach = reaches(envs)
+    rmax = max(reach) or 1.0
     pairs, notes, done = [], [], []
     for label, tr, te in splits(envs):
         if not tr or not te:
@@ -272,30 +296,34 @@ def calibrate(problem, fit) -> dict:
             pred = pb.predict(f, c, pb.info_for(c, info.meta, info.name))
             if pred is None:
                 pairs.append({"record": info.name, "split": label, "distance": math.nan, "state": None,
-                              "errors": {}, "diverged": True})
+                              "errors": {}, "diverged": True, "reach": reach[i] / rmax})
                 continue
-            dist = pi.envelope_distance(pi.state_envelope(pred, L, U0), env_tr)
+            dist = pi.envelope_distance(pi.state_envelope(pi.running(pred, c), L, U0), env_tr)
             meas, got = metric_values(info.name, c, c, L, U0), metric_values(info.name, c, pred, L, U0)
             errs = {m: log_error(got.get(m), v) for m, v in meas.items()}
             pairs.append({"record": info.name, "split": label, "distance": dist["distance"], "state": dist["state"],
-                          "errors": {m: e for m, e in errs.items() if math.isfinite(e)}, "diverged": False})
+                          "errors": {m: e for m, e in errs.items() if math.isfinite(e)}, "diverged": False,
+                          "reach": reach[i] / rmax})
     if not done:
         notes.append("fewer than two training records: the extrapolation error cannot be calibrated")
     return {"pairs": pairs, "envelope": pi.state_envelope(problem.records, L, U0), "splits": done, "notes": notes}
 
 
 def growth_for(cal: dict, metric: str) -> dict:
-    """The extrapolation error's growth for ``metric``: from the held-out pairs that carry it (two at least),
-    else from the surrogate (the RMS yaw rate) -- ``source`` says which. A held-out replay that diverged counts
-    as an error of log 2 at its record's distance (unknown: the largest seen), so that divergence is not left
-    out of the calibration (assumption)."""
-    own = [p for p in cal["pairs"] if metric in p["errors"]]
-    use, source = (own, metric) if len(own) >= 2 else (
-        [p for p in cal["pairs"] if SURROGATE in p["errors"]], SURROGATE)
+    """The extrapolation error's growth for ``metric`` from the held-out pairs of records that reach at least
+    ``MIN_REACH`` of the farthest record's reach (assumption: a much smaller manoeuvre's relative errors are
+    dominated by what a large one hardly feels -- a rudder offset, an asymmetry, the noise -- and say nothing about
+    a prediction at the envelope's edge or beyond): the metric's own errors where two or more such records carry
+    it, else those of the surrogate (the RMS yaw rate) -- ``source`` says which. A held-out replay that diverged
+    counts as an error of log 2 at the farthest distance seen, so that divergence is not left out (assumption)."""
+    big = [p for p in cal["pairs"] if p.get("reach", 1.0) >= MIN_REACH]
+    own = [p for p in big if metric in p["errors"]]
+    use, source = (own, metric) if len(own) >= 2 else ([p for p in big if SURROGATE in p["errors"]], SURROGATE)
     dmax = max([p["distance"] for p in cal["pairs"] if math.isfinite(p["distance"])] or [0.0])
-    d = [p["distance"] for p in use] + [dmax for p in cal["pairs"] if p.get("diverged")]
-    e = [p["errors"][source] for p in use] + [math.log(2.0) for p in cal["pairs"] if p.get("diverged")]
-    return {**pi.fit_growth(d, e), "source": source}
+    div = [p for p in big if p.get("diverged")]
+    d = [p["distance"] for p in use] + [dmax] * len(div)
+    e = [p["errors"][source] for p in use] + [math.log(2.0)] * len(div)
+    return {**pi.fit_growth(d, e), "source": source, "left_out_small": len(cal["pairs"]) - len(big)}
 
 
 # ---------------------------------------------------------------------------------------------- sensitivity

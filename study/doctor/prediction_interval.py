@@ -20,8 +20,9 @@ The **envelope** of a set of records (:func:`state_envelope`) is, per state, the
 the drift angle |beta| and the rudder angle |delta| (v' = v/U, r' = r L/U, beta = atan2(-v, u), U the speed
 through the water), each sample weighted by (U/U0)^4 -- the information it carries about a hull coefficient: the
 hull force scales with the dynamic pressure, U^2, and the information with the force's square -- over samples
-faster than a tenth of U0 (slower ones make v' and r' meaningless). A record at low speed thus hardly widens the
-envelope of a model identified at speed. The 99th percentile rather than the maximum: one noisy sample does not stretch the envelope
+faster than a tenth of U0 (slower ones make v' and r' meaningless), while the propeller runs (at half its median
+running speed or more: a record's end, where the propeller stops and the ship drifts to rest, is no part of its
+manoeuvre). A record at low speed thus hardly widens the envelope of a model identified at speed. The 99th percentile rather than the maximum: one noisy sample does not stretch the envelope
 (assumption). The **distance** of a prediction outside an envelope (:func:`envelope_distance`) is the largest
 relative excess over the states, max_s max(0, x_s / X_s - 1): 0 inside, 0.5 when one state goes 50 % beyond the
 records.
@@ -40,6 +41,8 @@ STATES = ("v'", "r'", "drift_deg", "rudder_deg")
 MIN_SPEED_U0 = 0.1
 #: the envelope's quantile per state (weighted by (U/U0)^4)
 ENVELOPE_QUANTILE = 0.99
+#: a sample counts in an envelope while the propeller runs at this share of its median running speed or more
+PROPELLER_RUNNING = 0.5
 #: posterior draws needed for an identification spread (a share of those drawn)
 MIN_FINITE_DRAWS = 0.5
 
@@ -129,12 +132,30 @@ def combine(value: float, s_id: float, s_struct: float, s_extrap: float, level: 
 
 
 # ---------------------------------------------------------------------------------------------- envelope
-def nondimensional_states(df, L: float, U0: float) -> tuple[dict, np.ndarray]:
+def running(frame, measured=None, share: float = PROPELLER_RUNNING):
+    """``frame`` restricted to the samples where the propeller runs at ``share`` of its median running speed or
+    more -- the record's ``n`` (or ``measured``'s, interpolated at the frame's times, for a replay); unchanged
+    without one. The end of a record where the propeller stops and the ship drifts to rest is no part of the
+    manoeuvre its metrics describe, and there v' and r' (over a vanishing speed) run away."""
+    src = measured if measured is not None else frame
+    if frame is None or src is None or "n" not in getattr(src, "columns", ()):
+        return frame
+    n = np.abs(np.asarray(src["n"], float))
+    if measured is not None:
+        n = np.interp(np.asarray(frame["time"], float), np.asarray(src["time"], float), n)
+    on = n[np.isfinite(n) & (n > 0)]
+    if not len(on):
+        return frame
+    keep = np.isfinite(n) & (n >= share * float(np.median(on)))
+    return frame[keep]
+
+
+def nondimensional_states(df, L: float, U0: float, min_speed: float = MIN_SPEED_U0) -> tuple[dict, np.ndarray]:
     """({state: |value| per kept sample}, weights (U/U0)^4) of a frame with ``u, v, r`` (and ``delta`` when
-    present) over its samples faster than ``MIN_SPEED_U0`` U0."""
+    present) over its samples faster than ``min_speed`` U0."""
     u, v, r = (np.asarray(df[c], float) for c in ("u", "v", "r"))
     U = np.hypot(u, v)
-    ok = np.isfinite(U) & np.isfinite(r) & (U > MIN_SPEED_U0 * U0)
+    ok = np.isfinite(U) & np.isfinite(r) & (U > min_speed * U0)
     u, v, r, U = u[ok], v[ok], r[ok], U[ok]
     out = {"v'": np.abs(v / U), "r'": np.abs(r * L / U), "drift_deg": np.abs(np.degrees(np.arctan2(-v, u)))}
     if "delta" in getattr(df, "columns", ()):
@@ -154,16 +175,18 @@ def weighted_quantile(x, w, q: float) -> float:
     return float(xs[min(np.searchsorted(cw, q * cw[-1]), len(xs) - 1)])
 
 
-def state_envelope(frames, L: float, U0: float, q: float = ENVELOPE_QUANTILE) -> dict:
+def state_envelope(frames, L: float, U0: float, q: float = ENVELOPE_QUANTILE,
+                   min_speed: float = MIN_SPEED_U0) -> dict:
     """The envelope of records (one frame or several, pooled): per state of :data:`STATES` the weighted
-    ``q`` quantile of its magnitude (see the module docstring); NaN for a state no frame has."""
+    ``q`` quantile of its magnitude over the samples faster than ``min_speed`` U0 (see the module docstring);
+    NaN for a state no frame has."""
     frames = [frames] if hasattr(frames, "columns") else [f for f in frames if f is not None]
     if not (L > 0 and U0 > 0):
         raise ValueError(f"state_envelope: L={L!r} and U0={U0!r} must be positive")
     xs = {s: [] for s in STATES}
     ws = {s: [] for s in STATES}
     for f in frames:
-        vals, w = nondimensional_states(f, L, U0)
+        vals, w = nondimensional_states(running(f), L, U0, min_speed)
         for s, a in vals.items():
             xs[s].append(a)
             ws[s].append(w)

@@ -18,6 +18,11 @@ import numpy as np
 from . import model_error as me
 from . import prediction_interval as pi
 
+#: the standard turns a report predicts (title, manoeuvre config or dict; IMO MSC.137(76))
+TURNS = (("35 deg turning circle to starboard", "turning_35"),
+         ("35 deg turning circle to port", {"name": "turning_35_port", "type": "turning", "first": "port",
+                                            "t_start": 10.0, "amp_deg": 35.0, "pullout_deg": 540.0,
+                                            "duration_L": 60.0}))
 #: the turning-circle metrics a predicted turn gives (``study.metrics.turning_metrics``), in ship lengths
 TURN_METRICS = ("tactical_diameter_L", "advance_L", "transfer_L")
 #: a coefficient is named as a carrier of a metric when its share of the variance is at least this
@@ -50,7 +55,9 @@ def _finite(x) -> bool:
 def metric_interval(value: float, draw_values, alt_values, distance: float, growth: dict,
                     level: float = 0.9) -> dict:
     """One metric's interval and its parts: ``{'low', 'high', 'half_width', 's_id', 's_struct', 's_extrap',
-    'draws', 'alternatives', 'distance', 'growth_source', 'why'}`` (``why``: a reason when it has none)."""
+    'draws', 'alternatives', 'distance', 'growth_source', 'why', 'caveat'}`` (``why``: a reason when it has none;
+    ``caveat``: set when the prediction lies farther outside the envelope than any held-out record did, so that
+    the growth of its error is assumed, not measured)."""
     s_id, n_draws = pi.draws_log_sd(draw_values, level)
     s_struct, n_alt = pi.structural_log_sd(value, alt_values)
     s_ext = pi.extrapolation_log_sd(distance, growth) if _finite(distance) else math.nan
@@ -62,9 +69,13 @@ def metric_interval(value: float, draw_values, alt_values, distance: float, grow
         why = f"only {n_draws} of {len(np.ravel(draw_values))} posterior draws reached the metric"
     elif not math.isfinite(s_ext):
         why = growth.get("note") or "the extrapolation error could not be calibrated"
+    d_max = growth.get("d_max", math.nan)
+    beyond = _finite(distance) and _finite(d_max) and distance > d_max + EDGE
+    caveat = (f"the prediction lies {distance:.2g} outside the training envelope; the error's growth was measured "
+              f"only up to {d_max:.2g}: beyond that the interval assumes it grows no faster") if beyond else None
     return {"low": out["low"], "high": out["high"], "half_width": out["half_width"], "s_id": s_id,
             "s_struct": s_struct, "s_extrap": s_ext, "draws": n_draws, "alternatives": n_alt,
-            "distance": distance, "growth_source": growth.get("source"), "why": why}
+            "distance": distance, "growth_source": growth.get("source"), "why": why, "caveat": caveat}
 
 
 def _pow(letters: str) -> str:
@@ -186,6 +197,7 @@ def predict_metrics(problem, fit, v, maneuver, alternatives=(), cal: dict | None
         hw = values[m] * iv["half_width"] if _finite(iv["half_width"]) else math.inf
         res[m] = {"value": values[m], **iv, "carriers": carriers(sens, point, problem.records, L, U0, "L", hw)}
     return {"metrics": res, "frame": point, "alternatives": [a[0] for a in alternatives],
+            "alternative_values": {a[0]: v for a, v in zip(alternatives, alt_vals)},
             "extrapolation": {**dist, "prediction": env_pred, "training": cal["envelope"],
                               "text": extrapolation_text(dist, env_pred, cal["envelope"])},
             "calibration": {"splits": cal["splits"], "notes": cal["notes"]}, "draw_values": drawn}
@@ -286,7 +298,7 @@ def predict_turn(problem, fit, u0: float | None = None, n: float | None = None, 
                               level)
         out.update({m: res["metrics"][m]["value"] for m in TURN_METRICS})
         out.update(metrics=res["metrics"], extrapolation=res["extrapolation"], alternatives=res["alternatives"],
-                   notes=notes + res["calibration"]["notes"])
+                   alternative_values=res["alternative_values"], notes=notes + res["calibration"]["notes"])
         tds = res["draw_values"]["tactical_diameter_L"]
     ok = np.isfinite(tds)
     out["finite_draws"] = int(ok.sum())

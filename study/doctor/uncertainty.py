@@ -5,7 +5,8 @@ For the baseline and the final model, every ``maneuver_metrics`` row of a valida
 and ``<model>_high`` (the 90 % interval) and ``<model>_uncertainty`` (its parts); the final model's rows get
 ``carriers`` and the record's ``extrapolation``. The models the doctor cannot tell apart from one of them are the
 other models it fitted whose training and (scored) validation errors are within ``tie`` of that model's or lower --
-its candidates, ladder steps and their equation-error twins, minus the physically implausible ones -- plus, with
+its candidates, ladder steps and their equation-error twins, minus the physically implausible ones and those whose
+effect parameters sit on a bound of their search box (``model_error.at_bounds``: not identified) -- plus, with
 validation records given, the model's anchor halved and doubled and the anchor set itself when it fits the
 training records as well. With each record held out in turn (no validation records) each record is predicted by
 its fold's fits, and the extrapolation error is calibrated once on all training records (an approximation: the
@@ -21,17 +22,10 @@ import numpy as np
 
 from . import model_error as me
 from . import prediction_interval as pi
-from .predictions import METHOD, carriers, extrapolation_text, metric_interval
+from .predictions import METHOD, TURNS, carriers, extrapolation_text, metric_interval
 
 #: posterior draws per model and record
 DRAWS = 32
-#: the turns the report predicts (a manoeuvre config or dict each; IMO MSC.137(76))
-TURNS = (("35 deg turning circle to starboard", "turning_35"),
-         ("35 deg turning circle to port", {"name": "turning_35_port", "type": "turning", "first": "port",
-                                            "t_start": 10.0, "amp_deg": 35.0, "pullout_deg": 540.0,
-                                            "duration_L": 60.0}))
-
-
 def _mean_on(ev, records: list) -> float:
     """An evaluation's mean validation error over ``records`` (inf with none)."""
     return float(np.mean(ev.per_record(records))) if records else math.inf
@@ -61,8 +55,11 @@ def alternative_evaluations(doctor, ev, tie: float) -> tuple:
             continue
         label = _label(effects) + (" (refined on the replays)" if refine else "")
         v, t = _mean_on(e, scored), e.training_error
+        bounds = me.at_bounds(doctor.problem, e.fit)
         if set(effects) & implausible:
             excluded.append(f"{label}: physically implausible here")
+        elif bounds:
+            excluded.append(f"{label}: {', '.join(bounds)} on a bound of its search box (not identified)")
         elif not (math.isfinite(v) and v <= (1.0 + tie) * own_v):
             excluded.append(f"{label}: validation error {v:.3g} against {own_v:.3g}")
         elif not (math.isfinite(t) and t <= (1.0 + tie) * own_t):
@@ -133,12 +130,14 @@ def model_uncertainty(doctor, ev, rows: list, frames: dict, role: str, tie: floa
         table = me.coefficient_table(problem, small, post) if (sensitivity and post is not None) else []
         sens = me.sensitivity_sets(post, table) if table else []
         vals = _record_values(doctor, name, df, me.replay_members(problem, small, c, info, sets + sens))
+        usable = [(lab, e) for lab, e in alts if fold is None or e.fold_fits]
+        labels = [lab for lab, _ in usable] + [lab for lab, _, _ in settings]
         alt_frames = [doctor.predict(problem, e.fit if fold is None else e.fold_fits[fold], c, info, fold)
-                      for _, e in alts if fold is None or e.fold_fits]
+                      for _, e in usable]
         alt_frames += [pb.predict(_reduced(doctor, pb, ft, name, fold), c, info) for _, pb, ft in settings]
         alt_vals = _record_values(doctor, name, df, alt_frames)
         env_tr = cal["envelope"] if fold is None else pi.state_envelope(problem.records, L, U0)
-        env_pr = pi.state_envelope(frames[name], L, U0) if frames.get(name) is not None else {}
+        env_pr = pi.state_envelope(pi.running(frames[name], c), L, U0) if frames.get(name) is not None else {}
         dist = pi.envelope_distance(env_pr, env_tr) if env_pr else {"distance": math.nan, "excess": {},
                                                                     "state": None}
         for row in by_record[name]:
@@ -148,15 +147,19 @@ def model_uncertainty(doctor, ev, rows: list, frames: dict, role: str, tie: floa
                                  level)
             row[f"{role}_low"], row[f"{role}_high"] = iv["low"], iv["high"]
             row[f"{role}_uncertainty"] = {**{k2: v for k2, v in iv.items() if k2 not in ("low", "high")},
-                                          "failed_alternatives": len(alt_frames) - iv["alternatives"]}
+                                          "failed_alternatives": len(alt_frames) - iv["alternatives"],
+                                          "alternative_values": dict(zip(labels, [v.get(m, math.nan)
+                                                                                  for v in alt_vals]))}
             if table:
                 srows = me.sensitivities(table, row[role], [v.get(m, math.nan) for v in vals[len(sets):]])
                 hw = row[role] * iv["half_width"] if np.isfinite(iv["half_width"]) else math.inf
                 row["carriers"] = carriers(srows, frames.get(name), problem.records, L, U0, row.get("unit", ""), hw)
         if sensitivity:
+            caveats = [r[f"{role}_uncertainty"]["caveat"] for r in by_record[name]
+                       if r.get(f"{role}_uncertainty", {}).get("caveat")]
             records[name] = {**dist, "prediction": env_pr, "training": env_tr,
                              "text": extrapolation_text(dist, env_pr, env_tr) if env_pr else
-                             "the replay diverged: no states to compare"}
+                             "the replay diverged: no states to compare", "caveat": caveats[0] if caveats else None}
     return {"alternatives": [a[0] for a in alts] + [s[0] for s in settings], "excluded": excluded,
             "notes": notes + cal["notes"], "records": records, "calibration": calibration_summary(cal)}
 
@@ -214,7 +217,8 @@ def summary(mm: list, sec: dict) -> list:
     out = []
     for name, rec in sec["final"]["records"].items():
         if rec.get("text", "").startswith("EXTRAPOLATES"):
-            out.append(f"{name}: the final model's replay {rec['text']}")
+            out.append(f"{name}: the final model's replay {rec['text']}" +
+                       (f" ({rec['caveat']})" if rec.get("caveat") else ""))
     for t in sec.get("predicted_turns", []):
         if "metrics" not in t:
             continue
@@ -224,8 +228,8 @@ def summary(mm: list, sec: dict) -> list:
         reset = [f"{c['coefficient']} ({c['reset']:+.2g} L)" for c in cs if c["coefficient"] not in share]
         out.append(f"{t['maneuver']}: tactical diameter {td.get('value', math.nan):.3g} L "
                    f"(90 %: {td.get('low', math.nan):.3g}-{td.get('high', math.nan):.3g} L); "
-                   f"{t['extrapolation']['text']}" + (f"; carried by {', '.join(share)} (its variance)" if share
-                                                      else "")
+                   f"{t['extrapolation']['text']}" + (f" ({td['caveat']})" if td.get("caveat") else "")
+                   + (f"; carried by {', '.join(share)} (its variance)" if share else "")
                    + (f"; reset to their anchor values {', '.join(reset)} move it beyond its interval" if reset
                       else ""))
     held = [r for r in mm if np.isfinite(r.get("measured", np.nan)) and np.isfinite(r.get("final_low", np.nan))]

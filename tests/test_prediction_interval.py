@@ -219,6 +219,8 @@ def test_an_effect_parameter_on_a_bound_of_its_box_marks_a_fit_as_not_identified
     assert [b.split(" ")[0] for b in me.at_bounds(problem, fit)] == ["h_T"]
     fit.outer = {"wP0": 0.45, "h_T": 3.0}
     assert me.at_bounds(problem, fit) == []
+    delay = SimpleNamespace(outer_params=lambda effects: [("rudder_delay", 0.0, 6.67, ())])
+    assert me.at_bounds(delay, SimpleNamespace(effects=("rudder_dynamics",), outer={"rudder_delay": 0.0})) == []
 
 
 def test_a_prediction_beyond_the_farthest_held_out_record_says_its_growth_is_assumed():

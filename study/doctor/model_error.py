@@ -214,11 +214,14 @@ def anchor_variants(problem, fit, factors=(0.5, 2.0)) -> list:
 def at_bounds(problem, fit, rel: float = 1e-3) -> list:
     """The effects' nonlinear parameters of ``fit`` that lie on a bound of their search box (within ``rel`` of
     its width): their optimum lies outside the range the catalogue holds physical -- an identification that
-    failed, not a model the records support (a wake fraction of 0.7, a depth of 1.1 drafts in a pond)."""
+    failed, not a model the records support (a wake fraction of 0.7, a depth of 1.1 drafts in a pond). A bound
+    at zero is not counted: there the effect vanishes (no delay, no lag), a physical limit, not a failure."""
     out = []
     for name, lo, hi, _ in problem.outer_params(fit.effects):
         x = fit.outer.get(name)
-        if isinstance(x, (int, float)) and (abs(x - lo) <= rel * (hi - lo) or abs(x - hi) <= rel * (hi - lo)):
+        if not isinstance(x, (int, float)):
+            continue
+        if any(b != 0.0 and abs(x - b) <= rel * (hi - lo) for b in (lo, hi)):
             out.append(f"{name} = {x:.3g} (bounds {lo:.3g}, {hi:.3g})")
     return out
 

@@ -215,10 +215,20 @@ def summary(mm: list, sec: dict) -> list:
     """Plain sentences: which predictions extrapolate (how far, in which states) and which coefficients carry
     them; how often the intervals hold the measured value."""
     out = []
-    for name, rec in sec["final"]["records"].items():
-        if rec.get("text", "").startswith("EXTRAPOLATES"):
-            out.append(f"{name}: the final model's replay {rec['text']}" +
-                       (f" ({rec['caveat']})" if rec.get("caveat") else ""))
+    names = {"v'": "|v'|", "r'": "|r'|", "drift_deg": "drift", "rudder_deg": "rudder"}
+    far = {n: r for n, r in sec["final"]["records"].items() if r.get("text", "").startswith("EXTRAPOLATES")}
+    if far:
+        items = [f"{n} ({r['distance']:.2g}; {names.get(r['state'], r['state'])} "
+                 f"+{100 * r['excess'][r['state']]:.0f} %)" for n, r in far.items()]
+        out.append(f"{len(far)} of {len(sec['final']['records'])} validation replays of the final model "
+                   f"EXTRAPOLATE beyond the training records (distance outside their envelope; the state that sets "
+                   f"it): {', '.join(items)}")
+        caveats = [r["caveat"] for r in far.values() if r.get("caveat")]
+        if caveats:
+            g = sec["final"]["calibration"]["growth"]
+            out.append(f"{len(caveats)} of them lie farther out than the calibration reached (its farthest held-out "
+                       f"record: {g.get('d_max', math.nan):.2g}): their intervals assume the error grows no faster "
+                       "beyond it")
     for t in sec.get("predicted_turns", []):
         if "metrics" not in t:
             continue

@@ -94,3 +94,18 @@ def test_kvlcc2_from_hsvas_zigzags_the_report_says_the_turn_extrapolates_and_nam
         assert any("extrapolated" in c["sentence"] for c in td["carriers"])
         assert td["half_width"] > 0.05  # wider than the posterior draws' +-2 %
     assert "EXTRAPOLATES beyond the training records" in page and "Nvvr" in page
+
+
+def test_a_part_that_cannot_be_computed_is_said_and_the_rest_is_still_reported(report, monkeypatch):
+    from study.doctor import uncertainty
+
+    d, _, _ = report
+
+    def singular(doctor, fit):
+        raise np.linalg.LinAlgError("singular matrix")
+
+    monkeypatch.setattr(uncertainty, "calibration", singular)
+    sec = uncertainty.annotate(d, [], d.result["base"], d.result["final"], {}, {})
+    assert len(sec["errors"]) == 3 and all("LinAlgError: singular matrix" in e for e in sec["errors"])
+    assert sec["predicted_turns"] == [] and sec["summary"][-3:] == sec["errors"]
+    assert sec["training_envelope"]["v'"] > 0

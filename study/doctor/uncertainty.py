@@ -202,12 +202,19 @@ def annotate(doctor, mm: list, base, final, mb: dict, mf: dict, level: float = 0
     """Fill the intervals of the ``maneuver_metrics`` rows ``mm`` (baseline and final; the final's carriers and
     extrapolation) and return the report's ``prediction_uncertainty`` section."""
     tie = doctor.opt.tie
-    sec = {"level": level, "method": METHOD}
-    sec["final"] = model_uncertainty(doctor, final, mm, mf, "final", tie, level, sensitivity=True)
-    sec["baseline"] = model_uncertainty(doctor, base, mm, mb, "baseline", tie, level)
+    sec = {"level": level, "method": METHOD, "errors": []}
+    parts = (("final", lambda: model_uncertainty(doctor, final, mm, mf, "final", tie, level, sensitivity=True)),
+             ("baseline", lambda: model_uncertainty(doctor, base, mm, mb, "baseline", tie, level)),
+             ("predicted_turns", lambda: predicted_turns(doctor, final, tie, level)))
+    for key, part in parts:
+        try:
+            sec[key] = part()
+        except Exception as e:  # noqa: BLE001 -- a part that fails is reported, the report is still written
+            sec[key] = [] if key == "predicted_turns" else {"records": {}, "alternatives": [], "excluded": [],
+                                                             "notes": [], "calibration": {}}
+            sec["errors"].append(f"{key}: could not be computed ({type(e).__name__}: {e})")
     sec["training_envelope"] = pi.state_envelope(doctor.problem.records, doctor.problem.L, doctor.problem.U0)
-    sec["predicted_turns"] = predicted_turns(doctor, final, tie, level)
-    sec["summary"] = summary(mm, sec)
+    sec["summary"] = summary(mm, sec) + sec["errors"]
     return sec
 
 
@@ -225,7 +232,7 @@ def summary(mm: list, sec: dict) -> list:
                    f"it): {', '.join(items)}")
         caveats = [r["caveat"] for r in far.values() if r.get("caveat")]
         if caveats:
-            g = sec["final"]["calibration"]["growth"]
+            g = sec["final"]["calibration"].get("growth", {})
             out.append(f"{len(caveats)} of them lie farther out than the calibration reached (its farthest held-out "
                        f"record: {g.get('d_max', math.nan):.2g}): their intervals assume the error grows no faster "
                        "beyond it")

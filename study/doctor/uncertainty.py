@@ -1,18 +1,19 @@
 """The doctor's predicted manoeuvre metrics with their intervals, how far each prediction extrapolates and which
 coefficients carry it (the method: ``study.doctor.predictions.METHOD``).
 
-For the baseline and the final model, every ``maneuver_metrics`` row of a validation record gets ``<model>_low``
-and ``<model>_high`` (the 90 % interval) and ``<model>_uncertainty`` (its parts); the final model's rows get
-``carriers`` and the record's ``extrapolation``. The models the doctor cannot tell apart from one of them are the
-other models it fitted whose training and (scored) validation errors are within ``tie`` of that model's or lower --
-its candidates, ladder steps and their equation-error twins, minus the physically implausible ones and those whose
-effect parameters sit on a bound of their search box (``model_error.at_bounds``: not identified) -- plus, with
-validation records given, the model's anchor halved and doubled and the anchor set itself when it fits the
-training records as well. With each record held out in turn (no validation records) each record is predicted by
-its fold's fits, and the extrapolation error is calibrated once on all training records (an approximation: the
-folds' own calibrations would each leave one record out). ``predicted_turns`` adds what the final model
-predicts for a standard 35 deg turning circle to either side from a steady approach at the service speed, a
-manoeuvre nobody measured (``study.doctor.turn_prediction.predict_turn``).
+For the baseline and the final model, every ``maneuver_metrics`` row of a validation record gets ``<model>_low`` and
+``<model>_high`` (the 90 % interval) and ``<model>_uncertainty`` (its parts); the final model's rows get
+``carriers`` (all but the lengths in metres, whose twins in ship lengths have them) and the record's ``extrapolation``. The
+models the doctor cannot tell apart from one of them are the other models it fitted whose training and (scored)
+validation errors are within ``tie`` of that model's or lower -- its candidates, ladder steps and their
+equation-error twins, minus the physically implausible ones and those whose effect parameters sit on a bound of
+their search box (``model_error.at_bounds``: not identified) -- plus, with validation records given, the model's
+anchor halved and doubled and the anchor set itself when it fits the training records as well. With each record held
+out in turn (no validation records) each record is predicted by its fold's fits, and the extrapolation error is
+calibrated once on all training records (an approximation: the folds' own calibrations would each leave one record
+out). ``predicted_turns`` adds what the final model predicts for a standard 35 deg turning circle to either side
+from a steady approach at the service speed, a manoeuvre nobody measured
+(``study.doctor.predictions.predict_turn``).
 """
 from __future__ import annotations
 
@@ -150,7 +151,7 @@ def model_uncertainty(doctor, ev, rows: list, frames: dict, role: str, tie: floa
                                           "failed_alternatives": len(alt_frames) - iv["alternatives"],
                                           "alternative_values": dict(zip(labels, [v.get(m, math.nan)
                                                                                   for v in alt_vals]))}
-            if table:
+            if table and row.get("unit") != "m":  # a length in metres: its twin in ship lengths carries them
                 srows = me.sensitivities(table, row[role], [v.get(m, math.nan) for v in vals[len(sets):]])
                 hw = row[role] * iv["half_width"] if np.isfinite(iv["half_width"]) else math.inf
                 row["carriers"] = carriers(srows, frames.get(name), problem.records, L, U0, row.get("unit", ""), hw)

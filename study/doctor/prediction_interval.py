@@ -16,16 +16,16 @@ normal quantile (1.645 at 90 %). They are not fully independent -- the held-out 
 identification spread and a structural error of their own -- so the sum may overstate the width; nothing here
 corrects for that.
 
-The **envelope** of a set of records (:func:`state_envelope`) is, per state, the 99th percentile of |v'|, |r'|,
-the drift angle |beta| and the rudder angle |delta| (v' = v/U, r' = r L/U, beta = atan2(-v, u), U the speed
-through the water), each sample weighted by (U/U0)^4 -- the information it carries about a hull coefficient: the
-hull force scales with the dynamic pressure, U^2, and the information with the force's square -- over samples
-faster than a tenth of U0 (slower ones make v' and r' meaningless), while the propeller runs (at half its median
-running speed or more: a record's end, where the propeller stops and the ship drifts to rest, is no part of its
-manoeuvre). A record at low speed thus hardly widens the envelope of a model identified at speed. The 99th percentile rather than the maximum: one noisy sample does not stretch the envelope
-(assumption). The **distance** of a prediction outside an envelope (:func:`envelope_distance`) is the largest
-relative excess over the states, max_s max(0, x_s / X_s - 1): 0 inside, 0.5 when one state goes 50 % beyond the
-records.
+The **envelope** of a set of records (:func:`state_envelope`) is, per state, the 99th percentile of |v'|, |r'|, the
+drift angle |beta| and the rudder angle |delta| (v' = v/U, r' = r L/U, beta = atan2(-v, u), U the speed through the
+water), each sample weighted by (U/U0)^4 -- the information it carries about a hull coefficient: the hull force
+scales with the dynamic pressure, U^2, and the information with the force's square -- over samples faster than a
+tenth of U0 (slower ones make v' and r' meaningless), while the propeller runs (at half its median running speed or
+more: a record's end, where the propeller stops and the ship drifts to rest, is no part of its manoeuvre). A record
+at low speed thus hardly widens the envelope of a model identified at speed. The 99th percentile rather than the
+maximum: one noisy sample does not stretch the envelope (assumption). The **distance** of a prediction outside an
+envelope (:func:`envelope_distance`) is the largest relative excess over the states, max_s max(0, x_s / X_s - 1): 0
+inside, 0.5 when one state goes 50 % beyond the records.
 """
 from __future__ import annotations
 

@@ -148,7 +148,7 @@ def extrapolation_text(dist: dict, env_pred: dict, env_train: dict) -> str:
     return "at the edge of the training envelope" if dist["distance"] > 0 else "inside the training envelope"
 
 
-# ---------------------------------------------------------------------------------------------- a turn
+# ---------------------------------------------------------------------------------------------- a turn's metrics
 def _turn_values(df, L: float) -> dict:
     from .. import metrics as M
 
@@ -203,7 +203,7 @@ def predict_metrics(problem, fit, v, maneuver, alternatives=(), cal: dict | None
             "calibration": {"splits": cal["splits"], "notes": cal["notes"]}, "draw_values": drawn}
 
 
-# ---------------------------------------------------------------------------------------------- a turn nobody measured
+# ------------------------------------------------------------------------------------ a turn nobody measured
 def setup_effects_left_out(problem, fit, facility: str | None = None, scale: str | None = None,
                            keep_setup_effects: bool = False) -> tuple:
     """(``fit`` for a prediction in ``facility`` at ``scale``, the set-up effects left out, why): the set-up effects

@@ -32,16 +32,14 @@ under the doctor's settings and under other reasonable ones, each turned to both
 """
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from .predictions import default_alternatives, predict_turn, setup_effects_left_out, turn_vessel
 
-from .predictions import default_alternatives, predict_turn, setup_effects_left_out, turn_vessel  # noqa: F401
-
-__all__ = ["predict_turn", "kvlcc2_hsva_table"]
+__all__ = ["predict_turn", "kvlcc2_hsva_table", "default_alternatives", "setup_effects_left_out", "turn_vessel"]
 
 #: the committed table's folder (rebuilt only when asked: --out paper_figs/doctor --overwrite)
 COMMITTED = Path(__file__).resolve().parents[2] / "paper_figs" / "doctor"

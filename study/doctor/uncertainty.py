@@ -3,16 +3,16 @@ coefficients carry it (the method: ``study.doctor.predictions.METHOD``).
 
 For the baseline and the final model, every ``maneuver_metrics`` row of a validation record gets ``<model>_low`` and
 ``<model>_high`` (the 90 % interval) and ``<model>_uncertainty`` (its parts); the final model's rows get
-``carriers`` (all but the lengths in metres, whose twins in ship lengths have them) and the record's ``extrapolation``. The
-models the doctor cannot tell apart from one of them are the other models it fitted whose training and (scored)
-validation errors are within ``tie`` of that model's or lower -- its candidates, ladder steps and their
-equation-error twins, minus the physically implausible ones and those whose effect parameters sit on a bound of
-their search box (``model_error.at_bounds``: not identified) -- plus, with validation records given, the model's
-anchor halved and doubled and the anchor set itself when it fits the training records as well. With each record held
-out in turn (no validation records) each record is predicted by its fold's fits, and the extrapolation error is
-calibrated once on all training records (an approximation: the folds' own calibrations would each leave one record
-out). ``predicted_turns`` adds what the final model predicts for a standard 35 deg turning circle to either side
-from a steady approach at the service speed, a manoeuvre nobody measured
+``carriers`` (all but the lengths in metres, whose twins in ship lengths have them) and the record's
+``extrapolation``. The models the doctor cannot tell apart from one of them are the other models it fitted whose
+training and (scored) validation errors are within ``tie`` of that model's or lower -- its candidates, ladder steps
+and their equation-error twins, minus the physically implausible ones and those whose effect parameters sit on a
+bound of their search box (``model_error.at_bounds``: not identified) -- plus, with validation records given, the
+model's anchor halved and doubled and the anchor set itself when it fits the training records as well. With each
+record held out in turn (no validation records) each record is predicted by its fold's fits, and the extrapolation
+error is calibrated once on all training records (an approximation: the folds' own calibrations would each leave one
+record out). ``predicted_turns`` adds what the final model predicts for a standard 35 deg turning circle to either
+side from a steady approach at the service speed, a manoeuvre nobody measured
 (``study.doctor.predictions.predict_turn``).
 """
 from __future__ import annotations

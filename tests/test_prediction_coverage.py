@@ -9,7 +9,7 @@ seeds), over 3 noise seeds. Each predicts the 35 deg turn to starboard from a st
 turn is the reference. Measured with this set-up: the combined 90 % intervals hold the truth's tactical
 diameter, advance and transfer on 24 of 24 datasets each; the posterior draws alone on 17, 17 and 12 of 24.
 The test asks at least 80 % for each metric, and that the draws alone fall short on at least one metric (the
-datasets are not trivially easy). About 20 s.
+datasets are not trivially easy). 20-60 s (18 s on an idle two-core machine).
 """
 from __future__ import annotations
 

@@ -43,6 +43,7 @@ from .. import facility as fac
 from ..identify.effects import list_effects, registry
 from ..identify.with_effects import (CHANNELS, UNITS, EffectsProblem, Fit, diverged_records, record_error,
                                    record_errors, validation_error)
+from .model_error import without_effects  # noqa: F401 -- also the doctor's API
 
 #: the consistency test needs this many validation records (a paired t-test on fewer has no power)
 MIN_RECORDS_FOR_TEST = 3
@@ -96,20 +97,6 @@ def _names(records) -> list:
 
 def _mean_on(ev: Evaluation, records: list) -> float:
     return float(np.mean(ev.per_record(records))) if records else math.inf
-
-
-def without_effects(problem, fit: Fit, drop) -> Fit:
-    """``fit`` with the effects ``drop`` left out: their nonlinear parameters, linear unknowns and the coefficients
-    they alone freed removed (those return to the vessel config's values); everything else as identified."""
-    drop = [e for e in fit.effects if e in set(drop)]
-    if not drop:
-        return fit
-    own = problem.by_effect(fit)
-    keep = tuple(e for e in fit.effects if e not in drop)
-    kept_names = set(problem.model_free) | {k for e in keep for k in own.get(e, {})}
-    gone = {k for e in drop for k in own.get(e, {}) if k not in kept_names}
-    return Fit(keep, {k: v for k, v in fit.outer.items() if k not in gone},
-               {k: v for k, v in fit.coefs.items() if k not in gone}, fit.training_error, fit.rss, fit.evaluations)
 
 
 def compare(base: np.ndarray, cand: np.ndarray, opt: Options) -> dict:
@@ -733,6 +720,9 @@ def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: 
     for name, df in meas.items():
         mm += maneuver_metrics(name, df, mb.get(name), mf.get(name), doctor.problem.L)
     candidate_metrics(doctor, rep, meas, mb)
+    from .uncertainty import annotate
+
+    uncertainty = annotate(doctor, mm, base, final, mb, mf)  # intervals, extrapolation, carriers; predicted turns
     # the figures go to a temporary folder first and are moved in at once: a doctor stopped meanwhile leaves no
     # figures/ that would make a rerun refuse ("already holds figures") though no report exists
     import os
@@ -753,6 +743,7 @@ def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: 
                    "python -m study.diagnose", "vessel": vessel, "model": model,
                    "structure": doctor.problem.structure.name, "worst_windows": windows,
                    "catalogue": catalogue_rows(doctor), "figures": listing, "maneuver_metrics": mm,
+                   "prediction_uncertainty": uncertainty,
                    "conventions": CONVENTIONS, "definitions": DEFINITIONS, "provenance": provenance(doctor)}
     (out / "report.json").write_text(json.dumps(html_report, indent=1, allow_nan=True, default=float),
                                      encoding="utf-8")

@@ -91,24 +91,43 @@ def kvlcc2_hsva_identified(out: Path = DEFAULT_OUT, overwrite: bool = False) -> 
 
 def _turns(rep: dict) -> list:
     """The validation turning circles' tactical diameters (report.json ``maneuver_metrics``): measured, the
-    baseline model's and the final model's replays, and the mean relative error of each over the turns both
-    replays complete."""
+    baseline model's and the final model's replays with the final's 90 % interval, the mean relative error of each
+    over the turns both replays complete, how many intervals hold the measured value and their median half-width;
+    then the final model's predicted 35 deg turns (``prediction_uncertainty``)."""
     rows = [m for m in rep.get("maneuver_metrics", []) if m["metric"] == "tactical_diameter_L"]
-    ok = lambda x: x is not None and x == x and abs(x) != float("inf")
-    if not rows:
-        return []
-    out = ["", "| turning circle | measured TD [L] | baseline | final |", "|---|---|---|---|"]
-    errs = {"baseline": [], "final": []}
-    for m in rows:
-        cells = [f"{m[k]:.2f}" if ok(m[k]) else "-" for k in ("measured", "baseline", "final")]
-        out.append(f"| {m['record']} | " + " | ".join(cells) + " |")
-        if ok(m["measured"]) and ok(m["baseline"]) and ok(m["final"]):
-            for k in errs:
-                errs[k].append(abs(m[k] / m["measured"] - 1))
-    if errs["baseline"]:
-        n = len(errs["baseline"])
-        out += ["", f"Mean |TD error| over the {n} turns both replays complete: baseline "
-                    f"{100 * sum(errs['baseline']) / n:.0f} %, final {100 * sum(errs['final']) / n:.0f} %."]
+    ok = lambda x: x is not None and x == x and abs(x) != float("inf")  # noqa: E731
+    out = []
+    if rows:
+        out = ["", "| turning circle | measured TD [L] | baseline | final | final, 90 % |", "|---|---|---|---|---|"]
+        errs = {"baseline": [], "final": []}
+        held, widths = 0, []
+        for m in rows:
+            cells = [f"{m[k]:.2f}" if ok(m[k]) else "-" for k in ("measured", "baseline", "final")]
+            lo, hi = m.get("final_low"), m.get("final_high")
+            iv = f"{lo:.2f}-{hi:.2f}" if ok(lo) and ok(hi) else "-"
+            out.append(f"| {m['record']} | " + " | ".join(cells) + f" | {iv} |")
+            if ok(m["measured"]) and ok(m["baseline"]) and ok(m["final"]):
+                for k in errs:
+                    errs[k].append(abs(m[k] / m["measured"] - 1))
+            if ok(lo) and ok(hi) and ok(m["measured"]):
+                held += lo <= m["measured"] <= hi
+                widths.append(m["final_uncertainty"]["half_width"])
+        if errs["baseline"]:
+            n = len(errs["baseline"])
+            out += ["", f"Mean |TD error| over the {n} turns both replays complete: baseline "
+                        f"{100 * sum(errs['baseline']) / n:.0f} %, final {100 * sum(errs['final']) / n:.0f} %."]
+        if widths:
+            widths.sort()
+            med = (widths[(len(widths) - 1) // 2] + widths[len(widths) // 2]) / 2
+            out.append(f"The final model's 90 % intervals hold {held} of {len(widths)} measured tactical diameters; "
+                       f"median half-width {100 * med:.0f} %.")
+    for t in (rep.get("prediction_uncertainty") or {}).get("predicted_turns", []):
+        td = (t.get("metrics") or {}).get("tactical_diameter_L")
+        if td:
+            who = ", ".join(c["coefficient"] for c in td.get("carriers", []))
+            out += ["", f"Predicted {t['maneuver']}: tactical diameter {td['value']:.2f} L (90 %: {td['low']:.2f}-"
+                        f"{td['high']:.2f}); {t['extrapolation']['text']}" + (f"; carried by {who}" if who else "")
+                    + "."]
     return out
 
 

@@ -679,10 +679,19 @@ def _metric_num(x) -> str:
     return f"{v:.4g}"
 
 
+def _interval(row: dict, col: str) -> str:
+    """Under a predicted value, its 90 % interval (``<col>_low``, ``<col>_high``; study.doctor.uncertainty)."""
+    from .html_uncertainty import interval_text
+
+    txt = interval_text(row.get(f"{col}_low"), row.get(f"{col}_high"))
+    return f'<br><span class="interval">90 %: {txt}</span>' if txt else ""
+
+
 def metrics_table_html(rows: list[dict]) -> str:
     """A small self-contained HTML ``<table class="maneuver-metrics">`` of ``study.maneuver_metrics.maneuver_metrics``
-    rows: record, metric (its definition as a tooltip), unit, measured, baseline, final; numbers to 4 significant
-    digits, NaN as ``n/a``; every string escaped. No rows: a table with one row saying so."""
+    rows: record, metric (its definition as a tooltip), unit, measured, baseline, final (with its 90 % interval
+    under it when the row has one); numbers to 4 significant digits, NaN as ``n/a``; every string escaped. No
+    rows: a table with one row saying so."""
     from ..maneuver_metrics import COLUMNS, TURNING_METRICS, ZIGZAG_METRICS
 
     units = {m: u for m, u, _ in TURNING_METRICS + ZIGZAG_METRICS}
@@ -700,7 +709,8 @@ def metrics_table_html(rows: list[dict]) -> str:
         title = f' title="{e(tip)}"' if tip else ""
         body.append(f'<tr><td class="record">{e(r.get("record"))}</td><td class="metric"{title}>{e(m)}</td>'
                     f'<td class="unit">{e(r.get("unit", units.get(str(m), "")))}</td>'
-                    + "".join(f'<td class="num">{e(_metric_num(r.get(c)))}</td>' for c in COLUMNS) + "</tr>")
+                    + "".join(f'<td class="num">{e(_metric_num(r.get(c)))}{_interval(r, c)}</td>' for c in COLUMNS)
+                    + "</tr>")
     if not body:
         body.append('<tr><td colspan="6" class="muted">No turning circle or zigzag among the validation records: '
                     'no standard manoeuvre metrics.</td></tr>')
@@ -746,6 +756,13 @@ def _maneuvers(r: dict) -> str:
              + '</p>')
     foot = desc + _defs(r, ["diverged"] if (bdiv or fdiv) else [])
     return _section("Manoeuvres in the ship's terms", intro + table + foot, "maneuvers")
+
+
+def _uncertainty(r: dict) -> str:
+    from .html_uncertainty import TITLE, uncertainty_section
+
+    body = uncertainty_section(r)
+    return _section(TITLE, body, "uncertainty") if body else ""
 
 
 def _mime(data: bytes) -> str:
@@ -1170,6 +1187,12 @@ def _safe(fn: Callable[..., str], *args: Any) -> str:
                 f"({_e(type(exc).__name__)}: {_e(exc)}).</p>")
 
 
+def _uncertainty_css() -> str:
+    from .html_uncertainty import CSS as UNCERTAINTY_CSS
+
+    return UNCERTAINTY_CSS
+
+
 def render_html(report: Mapping | None, figures: Mapping[str, bytes] | None = None) -> str:
     """The self-contained HTML5 page of a doctor's report.
 
@@ -1188,6 +1211,7 @@ def render_html(report: Mapping | None, figures: Mapping[str, bytes] | None = No
         _safe(_ranking, r),
         _safe(_errors, r),
         _safe(_maneuvers, r),
+        _safe(_uncertainty, r),
         _safe(_identifiability, r),
         _safe(_figures, r, figs),
         _safe(_worst, r),
@@ -1210,7 +1234,7 @@ def render_html(report: Mapping | None, figures: Mapping[str, bytes] | None = No
 <meta http-equiv="Content-Security-Policy" content="{CSP}">
 <meta name="generator" content="study.doctor.html">
 <title>{_e(title)}</title>
-<style>{CSS}</style>
+<style>{CSS}{_uncertainty_css()}</style>
 </head>
 <body>
 <header>

@@ -1,10 +1,11 @@
 """What an identified model predicts for a manoeuvre nobody measured, and how sure it can be.
 
-:func:`predict_turn` simulates a fitted model (:class:`study.identify.with_effects.EffectsProblem` and one of its
-fits) through a 35 deg turning circle (IMO MSC.137(76)) from a steady approach, and gives the tactical diameter and
-advance of the point estimate and of draws from the fit's Gaussian posterior (``EffectsProblem.posterior``: the
-prior-anchored normal equations with the doctor's data weight), so a prediction extrapolated from zigzags comes
-with the spread its coefficients allow. The draws run in one compiled batch (``study.sim.simulate_batch``).
+:func:`predict_turn` (``study.doctor.predictions``, re-exported here) simulates a fitted model
+(:class:`study.identify.with_effects.EffectsProblem` and one of its fits) through a 35 deg turning circle (IMO
+MSC.137(76)) from a steady approach, and gives the tactical diameter, advance and transfer, each with a 90 %
+interval that holds model error as well as the identification's spread, how far the turn lies outside the
+training records' envelope, and the coefficients that carry it. The draws and the sensitivity members run in one
+compiled batch (``study.sim.simulate_batch``).
 
 Choices, labelled:
 
@@ -12,113 +13,39 @@ Choices, labelled:
   runs straight at that speed, SIMMAN 2008's rule for the free-running turns: "the RPM such that the ship is in
   longitudinal equilibrium"); an identified model whose resistance differs from the published set's then turns
   at another rpm than the published set does. ``n`` gives a fixed rpm instead (e.g. the tank's). The draws turn at
-  the point estimate's rpm (their own resistance differs little: R'0 is among the best-determined coefficients).
+  the point estimate's rpm (their own resistance differs little: R'0 is among the best-determined coefficients);
+  every other model at its own.
 - *Set-up effects*: an effect of the training records' test set-up (``setup_effect``: a yaw bias, a rudder zero
   offset; ``study.facility``) is left out of a turn predicted for another facility or scale: ``facility`` names
   the facility the turn is predicted for (None: not stated, taken as another set-up than the training records',
   since a manoeuvre nobody measured was not run in their set-up), ``keep_setup_effects`` keeps them. The result
   says which were left out (``setup_left_out``).
-- *Interval*: the central ``level`` share of the draws' tactical diameters. It holds only the identification's
-  statistical spread, not the model error that the doctor's prior-data conflicts point to; a narrow interval
-  far from another source's figure says the records and that source disagree, not that either is right.
+- *Interval* (``study.doctor.predictions.METHOD``): the posterior draws' spread, the spread over models the
+  records cannot tell apart, and an extrapolation error calibrated on the training records (held out in turn)
+  that grows with the distance outside their envelope, added in quadrature on the log scale (an assumption).
+  ``td_low``/``td_high`` keep the draws' interval alone (identification spread only), for comparison.
 
 ``python -m study.doctor.turn_prediction`` writes the KVLCC2 case (HSVA's zigzags, ``../shared/data/real``) to
 ``<out>/kvlcc2_turn_from_zigzags.{md,csv}`` (default ``turn_prediction/`` in the current folder; the committed
 table: ``--out paper_figs/doctor --overwrite``): the published set against the hull identified from the zigzags
-under the doctor's settings and under other reasonable ones.
+under the doctor's settings and under other reasonable ones, each turned to both sides.
 """
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from .. import metrics as M
+from .predictions import default_alternatives, predict_turn, setup_effects_left_out, turn_vessel
 
-__all__ = ["predict_turn", "kvlcc2_hsva_table"]
+__all__ = ["predict_turn", "kvlcc2_hsva_table", "default_alternatives", "setup_effects_left_out", "turn_vessel"]
 
 #: the committed table's folder (rebuilt only when asked: --out paper_figs/doctor --overwrite)
 COMMITTED = Path(__file__).resolve().parents[2] / "paper_figs" / "doctor"
 #: the default output: a folder of the current directory, never a committed one
 DEFAULT_OUT = Path("turn_prediction")
 FILES = ("kvlcc2_turn_from_zigzags.csv", "kvlcc2_turn_from_zigzags.md")
-
-
-def _turn(df: pd.DataFrame, L: float) -> tuple[float, float]:
-    try:
-        m = M.turning_metrics(df, L=L)
-        return float(m["tactical_diameter_L"]), float(m["advance_L"])
-    except (ValueError, KeyError, IndexError):  # never reached 180 deg, or diverged
-        return float("nan"), float("nan")
-
-
-def setup_effects_left_out(problem, fit, facility: str | None = None, scale: str | None = None,
-                           keep_setup_effects: bool = False) -> tuple:
-    """(``fit`` for a prediction in ``facility`` at ``scale``, the set-up effects left out, why): the set-up effects
-    are left out unless kept, or the prediction's facility and scale are the training records' own."""
-    from ..facility import other_setup, setup_of
-    from .diagnose import without_effects
-
-    drop = [e for e in fit.effects if getattr(problem.effect(e), "setup_effect", False)]
-    if not drop or keep_setup_effects:
-        return fit, [], None
-    training = [setup_of(i.meta, problem.vessel_cfg) for i in problem.infos]
-    if facility is None:
-        why = "the prediction's facility is not stated (a manoeuvre nobody measured: not the training set-up)"
-    else:
-        why = other_setup((facility, scale), training)
-    if why is None:
-        return fit, [], None
-    return without_effects(problem, fit, drop), drop, why
-
-
-def predict_turn(problem, fit, u0: float | None = None, n: float | None = None, draws: int = 64, seed: int = 0,
-                 maneuver: str = "turning_35", level: float = 0.9, facility: str | None = None,
-                 scale: str | None = None, keep_setup_effects: bool = False) -> dict:
-    """Tactical diameter and advance [L] of ``fit``'s model in ``maneuver`` from a steady approach at ``u0``
-    (default: the vessel's U0), with the ``level`` interval of ``draws`` posterior draws (0: none); set-up effects
-    left out for another ``facility`` or ``scale`` unless ``keep_setup_effects`` (see the module's docstring).
-
-    Returns ``{'tactical_diameter_L', 'advance_L', 'td_low', 'td_high', 'td_draws_median', 'n', 'u0',
-    'draws', 'finite_draws', 'setup_left_out', 'setup_why'}``."""
-    from ..sim import simulate, simulate_batch, to_frame
-
-    fit, left_out, why = setup_effects_left_out(problem, fit, facility, scale, keep_setup_effects)
-    L = problem.L
-    u0 = float(problem.U0 if u0 is None else u0)
-    # the effects' constant forces (a yaw bias) are among the linear unknowns: the values are outer and linear
-    # ones together, as EffectsProblem.predict passes them
-    v = problem.vessel(fit.effects, fit.values, coefs=fit.coefs, replay=False)
-    if n is None:
-        if not hasattr(v.kind, "solve_n"):
-            raise ValueError(f"vessel kind '{v.kind_name}' has no propeller to solve for: give n")
-        n = float(v.kind.solve_n(v.params[:len(v.kind.PARAM_NAMES)], u0))
-    v = replace(v, n0=float(n), U0=u0)
-    td, adv = _turn(simulate(v, maneuver, u0=u0), L)
-    out = {"tactical_diameter_L": td, "advance_L": adv, "n": float(n), "u0": u0, "draws": int(draws),
-           "td_low": float("nan"), "td_high": float("nan"), "td_draws_median": float("nan"), "finite_draws": 0,
-           "setup_left_out": list(left_out), "setup_why": why}
-    post = problem.posterior(fit) if draws else None
-    if post is None:
-        return out
-    # draws from N(mean, cov); the covariance of a nearly rank-deficient problem is made positive semidefinite
-    # by clipping its eigenvalues (numpy's multivariate_normal would warn and do the same by SVD)
-    w, V = np.linalg.eigh(post["cov"])
-    z = np.random.default_rng(seed).standard_normal((draws, len(w)))
-    thetas = post["mean"] + (z * np.sqrt(np.clip(w, 0.0, None))) @ V.T
-    P = np.column_stack([problem.vessel(fit.effects, {**fit.outer, **dict(zip(post["names"], th))},
-                                        coefs=dict(zip(post["names"], th)), replay=False).params for th in thetas])
-    t, sims = simulate_batch(v, maneuver, P)
-    tds = np.array([_turn(to_frame(sims, t, b), L)[0] for b in range(draws)])
-    ok = np.isfinite(tds)
-    out["finite_draws"] = int(ok.sum())
-    if ok.sum() >= 2:
-        a = (1.0 - level) / 2.0
-        out.update(td_low=float(np.quantile(tds[ok], a)), td_high=float(np.quantile(tds[ok], 1.0 - a)),
-                   td_draws_median=float(np.median(tds[ok])))
-    return out
 
 
 #: the KVLCC2 cases: (label, anchor, effects); the first identified one is the doctor's default
@@ -132,13 +59,31 @@ CASES = (
 )
 
 
+def _case_alternatives(cases: list, k: int, tie: float = 0.1) -> list:
+    """The other identified cases that fit HSVA's records within ``tie`` of case ``k`` or better (training
+    misfit without the anchor's penalty) with no effect parameter on a bound, as (label, problem, fit)."""
+    from .model_error import at_bounds, data_error
+
+    _, pb, fit, _ = cases[k]
+    own = data_error(pb, fit) if pb.model_free else float("inf")  # the published set: every fit is as good
+    out = []
+    for j, (lab, p, f, _) in enumerate(cases):
+        twin = p is pb and f.effects == fit.effects  # the same fit, its set-up effect kept or not
+        if j != k and p.model_free and not twin and not at_bounds(p, f) and data_error(p, f) <= (1.0 + tie) * own:
+            out.append((lab, p, f))
+    return out
+
+
 def kvlcc2_hsva_table(data_dir=None, draws: int = 64) -> pd.DataFrame:
     """The published KVLCC2 set against hulls identified from HSVA's nine 1-5 deg switch zigzags (the doctor's
-    training records in ``study.doctor.examples``), each turned at 35 deg from HSVA's approach speed at its own
-    self-propulsion rpm and at HSVA's measured rpm."""
+    training records in ``study.doctor.examples``), each turned at 35 deg to both sides from HSVA's approach
+    speed at its own self-propulsion rpm (with the interval of :func:`predict_turn`; the other identified cases
+    that fit as well count among its alternatives), and to starboard at HSVA's measured rpm."""
     from ..identify.effects import list_effects, registry
     from ..identify.with_effects import EffectsProblem, Fit
     from ..loaders import load_records, real_data_dir
+    from .model_error import calibrate
+    from .predictions import TURNS
     from .run import diagnose_conf
 
     d = Path(data_dir) if data_dir else real_data_dir() / "kvlcc2_hsva" / "raw_data"
@@ -147,56 +92,95 @@ def kvlcc2_hsva_table(data_dir=None, draws: int = 64) -> pd.DataFrame:
     n_tank = float(np.median([r.data["n"].mean() for r in train]))
     conf = diagnose_conf(vessel="kvlcc2_l7", model="mmg_hull")
     effects = registry(list_effects())
-    rows = []
     known = EffectsProblem(conf["vessel"], {"name": "known", "type": "kind", "equations": {}}, train, None, effects)
-    published = Fit((), {}, {}, float("nan"))
-    problems = {}
+    cases, problems = [], {}
     for label, anchor, effs in (("published set (Yasukawa & Yoshimura 2015)", None, ()),) + CASES:
         if anchor is None:
-            pb, fit = known, published
-        else:
-            pb = problems.setdefault(anchor, EffectsProblem(conf["vessel"], conf["model"], train, None, effects,
-                                                           None, anchor))
-            fit = pb.fit(effs)
-        keep = "keep_setup_effects" in label
-        own = predict_turn(pb, fit, u0=u0, draws=draws, keep_setup_effects=keep)
-        tank = predict_turn(pb, fit, u0=u0, n=n_tank, draws=0, keep_setup_effects=keep)
-        rows.append({"model": label, "training_error": fit.training_error, "n_own_rps": own["n"],
-                     "TD_L": own["tactical_diameter_L"], "TD_L_low": own["td_low"], "TD_L_high": own["td_high"],
-                     "advance_L": own["advance_L"], "TD_L_at_tank_rpm": tank["tactical_diameter_L"],
-                     "draws_turned": own["finite_draws"] if own["draws"] and anchor is not None else None,
-                     "setup_left_out": ", ".join(own["setup_left_out"])})
+            cases.append((label, known, Fit((), {}, {}, float("nan")), False))
+            continue
+        pb = problems.setdefault(anchor, EffectsProblem(conf["vessel"], conf["model"], train, None, effects, None,
+                                                       anchor))
+        cases.append((label, pb, pb.fit(effs), "keep_setup_effects" in label))
+    rows, details = [], {}
+    for k, (label, pb, fit, keep) in enumerate(cases):
+        cal = calibrate(pb, fit)
+        alts = _case_alternatives(cases, k) + default_alternatives(pb, fit)[0]
+        side = {}
+        for (title, man), key in zip(TURNS, ("stbd", "port")):
+            side[key] = predict_turn(pb, fit, u0=u0, draws=draws, maneuver=man, keep_setup_effects=keep,
+                                     alternatives=alts, cal=cal)
+        tank = predict_turn(pb, fit, u0=u0, n=n_tank, draws=0, keep_setup_effects=keep, model_error=False)
+        own = side["stbd"]
+        row = {"model": label, "training_error": fit.training_error, "n_own_rps": own["n"],
+               "draws_turned": own["finite_draws"] if own["draws"] and pb.model_free else None,
+               "TD_L_draws_low": own["td_low"], "TD_L_draws_high": own["td_high"],
+               "advance_L": own["advance_L"], "TD_L_at_tank_rpm": tank["tactical_diameter_L"],
+               "setup_left_out": ", ".join(own["setup_left_out"]), "alternatives": len(own["alternatives"])}
+        for key, got in side.items():
+            td = got["metrics"]["tactical_diameter_L"]
+            row.update({f"TD_L_{key}": td["value"], f"TD_L_{key}_low": td["low"], f"TD_L_{key}_high": td["high"],
+                        f"distance_{key}": got["extrapolation"]["distance"]})
+        rows.append(row)
+        details[label] = side
     df = pd.DataFrame(rows)
-    ref = df.loc[0, "TD_L"]
-    df["TD_vs_published_pct"] = 100.0 * (df["TD_L"] / ref - 1.0)
-    df.attrs.update(u0=u0, n_tank=n_tank, records=[r.meta.get("name") for r in train])
+    for key in ("stbd", "port"):
+        df[f"TD_{key}_vs_published_pct"] = 100.0 * (df[f"TD_L_{key}"] / df.loc[0, f"TD_L_{key}"] - 1.0)
+    df.attrs.update(u0=u0, n_tank=n_tank, records=[r.meta.get("name") for r in train], details=details)
     return df
+
+
+def _interval(v, lo, hi) -> str:
+    return f"{v:.2f} ({lo:.2f}-{hi:.2f})" if np.isfinite(lo) and np.isfinite(hi) else (
+        f"{v:.2f}" if np.isfinite(v) else "-")
+
+
+def _carrier_lines(side: dict) -> list:
+    out = []
+    for key, title in (("stbd", "to starboard"), ("port", "to port")):
+        got = side[key]
+        td = got["metrics"]["tactical_diameter_L"]
+        out.append(f"- **{title}**: tactical diameter {_interval(td['value'], td['low'], td['high'])} L; "
+                   f"{got['extrapolation']['text']} (distance {got['extrapolation']['distance']:.2f}).")
+        out += [f"  - {c['sentence']}" for c in td["carriers"]]
+    return out
 
 
 def write_table(df: pd.DataFrame, out: Path, draws: int = 64) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     csv, md = (out / f for f in FILES)
     df.to_csv(csv, index=False, float_format="%.4g")
-    show = df.copy()
-    show["TD [L] (90 % of posterior draws)"] = [
-        f"{r.TD_L:.2f}" + (f" ({r.TD_L_low:.2f}-{r.TD_L_high:.2f}; {r.draws_turned:.0f}/{draws} draws turned)"
-                           if np.isfinite(r.TD_L_low) else "")
-        for r in df.itertuples()]
-    show = show[["model", "TD [L] (90 % of posterior draws)", "TD_vs_published_pct", "advance_L", "n_own_rps",
-                 "TD_L_at_tank_rpm", "training_error", "setup_left_out"]]
-    show.columns = ["model", "tactical diameter [L] (90 % of posterior draws)", "vs published [%]",
-                    "advance [L]", "own self-propulsion [rps]", f"TD at HSVA's {df.attrs['n_tank']:.2f} rps [L]",
-                    "training error", "set-up effects left out"]
+    show = pd.DataFrame({
+        "model": df["model"],
+        "TD to starboard [L] (90 %)": [_interval(r.TD_L_stbd, r.TD_L_stbd_low, r.TD_L_stbd_high)
+                                       for r in df.itertuples()],
+        "posterior draws alone": [f"{r.TD_L_draws_low:.2f}-{r.TD_L_draws_high:.2f}" if np.isfinite(r.TD_L_draws_low)
+                                  else "-" for r in df.itertuples()],
+        "TD to port [L] (90 %)": [_interval(r.TD_L_port, r.TD_L_port_low, r.TD_L_port_high)
+                                  for r in df.itertuples()],
+        "vs published, stbd / port [%]": [f"{a:+.1f} / {b:+.1f}" for a, b in zip(df["TD_stbd_vs_published_pct"],
+                                                                                 df["TD_port_vs_published_pct"])],
+        "outside the envelope (distance)": [f"{a:.2f}" for a in df["distance_stbd"]],
+        "own self-propulsion [rps]": df["n_own_rps"],
+        f"TD at HSVA's {df.attrs['n_tank']:.2f} rps [L]": df["TD_L_at_tank_rpm"],
+        "training error": df["training_error"], "set-up effects left out": df["setup_left_out"]})
+    default = CASES[0][0]
+    lines = _carrier_lines(df.attrs["details"][default]) if default in df.attrs.get("details", {}) else []
     md.write_text(
         "# KVLCC2 (L7): the 35 deg turn predicted from HSVA's zigzags\n\n"
         "Written by `python -m study.doctor.turn_prediction` (study/doctor/turn_prediction.py). Training: HSVA's "
         f"free-running zigzags with 1-5 deg switch headings ({len(df.attrs['records'])} records, "
-        "../shared/data/real/kvlcc2_hsva); every model turned at 35 deg to starboard from HSVA's approach speed "
-        f"({df.attrs['u0']:.3f} m/s) at its own self-propulsion rpm (SIMMAN 2008's rule), and at HSVA's measured "
-        f"rpm. The interval is the central 90 % of the {draws} draws from the fit's posterior (identification spread only, "
-        "not model error; a draw that diverged or never turned 180 deg is left out). An effect of HSVA's test set-up "
+        "../shared/data/real/kvlcc2_hsva); every model turned at 35 deg to either side from HSVA's approach speed "
+        f"({df.attrs['u0']:.3f} m/s) at its own self-propulsion rpm (SIMMAN 2008's rule), and to starboard at "
+        "HSVA's measured rpm. The 90 % interval holds the identification spread (the posterior draws: "
+        f"{draws}, the draws' own interval shown beside it), the spread over the models that fit the records as "
+        "well (the other identified rows within 10 % of the training error or better, the anchor halved and "
+        "doubled) and an extrapolation error calibrated on the training zigzags held out in turn, growing with the "
+        "distance outside their envelope (study/doctor/predictions.py, METHOD). An effect of HSVA's test set-up "
         "(the yaw bias: HSVA's report says its rudder was deflected from the geometric zero) is left out of a turn "
-        "predicted for another basin unless kept (keep_setup_effects).\n\n" + show.to_markdown(index=False, floatfmt=".3g") + "\n")
+        "predicted for another basin unless kept (keep_setup_effects).\n\n"
+        + show.to_markdown(index=False, floatfmt=".3g") + "\n\n"
+        f"## Where the doctor's default hull ({default}) predicts the turn, and what carries it\n\n"
+        + "\n".join(lines) + "\n")
     return [csv, md]
 
 

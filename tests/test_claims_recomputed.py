@@ -93,7 +93,7 @@ def test_coverage_counts_match_claims(study):
     fine = runs.groupby("cfg_model.name")["m_sample_dt_LU"].transform("min")
     nominal = runs[np.isclose(runs["m_sample_dt_LU"], fine) & (runs["cfg_noise.name"] == "low_relative")
                    & (runs.get("cfg_model.omit", pd.Series("[]", index=runs.index)).fillna("[]") == "[]")]
-    p = params[params["run_id"].isin(nominal["run_id"]) & (params["truth_kind"] == "exact")]
+    p = params[params["run_id"].isin(nominal["run_id"]) & params["truth_kind"].isin(["exact", "approximate"])]
     p = p.merge(nominal[["run_id", "cfg_model.name", "cfg_structure.name"]], on="run_id", suffixes=("_p", ""))
     rows = _claim_rows(study)
     for (m, st), g in p.groupby(["cfg_model.name", "cfg_structure.name"]):

@@ -29,7 +29,7 @@ def build(b: Builder, runs, params, claims):
     at = f" (sampled at {dt_s.iloc[0]:g} s)" if len(dt_s) else ""  # the outputs' captions, as before
     sub = sampling_label(pf)
     # each fit's largest error, then the median over the datasets of a set-up (one dataset where nothing is drawn)
-    worst = (pf.assign(dataset=pf.get("replicate", 0)).groupby(
+    worst = (pf.groupby(
         ["cfg_vessel.name", "cfg_model.name", "cfg_noise.name", "cfg_structure.name", "run_id"])["abs_rel_error"].max()
         .reset_index())
     tab = (worst.groupby(["cfg_vessel.name", "cfg_model.name", "cfg_noise.name", "cfg_structure.name"])

@@ -28,17 +28,26 @@ configuration says so (``model.effects``, ``train``, ...), and they are then ent
 estimator changes the fingerprint of SVR runs only, editing ``study/sim/mmg.py`` that of runs on MMG vessels,
 and editing the figures or the results store changes none.
 
-Each file is hashed on its contents with line endings normalised to ``\\n`` (never mtimes): the same checkout
-gives the same fingerprint on every machine and operating system. Each file is read and hashed once per process.
-Not included: the versions of numpy, scipy, ... (they are in the record's ``provenance``) and the configuration
-(it is in the run id). A comment or docstring edit in a component changes its fingerprint too (the honest,
-simple rule: what is hashed is what ran); ``resume=config`` reuses results whatever code made them.
+What is hashed is what Python executes (:data:`SCHEME` ``executed``): a module's source without its comments,
+docstrings (and any other statement that is a bare string), blank lines and trailing spaces
+(:func:`executed_source`), so that documenting a component leaves its results current while any change to a
+statement stales them. Other files (YAML) are hashed on their contents. Line endings are normalised to ``\\n``
+and mtimes never enter: the same checkout gives the same fingerprint on every machine, operating system and Python
+version (the positions come from :mod:`tokenize` and :mod:`ast`, the text from the file). Each file is read and
+hashed once per process. A record written before this rule (its ``code`` has no ``scheme``) was hashed on the
+files' bytes; it is compared with the bytes' fingerprint (``code['bytes']``), so it stays current until a file
+of its components changes at all. Not included: the versions of numpy, scipy, ... (they are in the record's
+``provenance``) and the configuration (it is in the run id); ``resume=config`` reuses results whatever code made
+them.
 """
 from __future__ import annotations
 
+import ast
 import hashlib
 import importlib.util
+import io
 import re
+import tokenize
 from functools import lru_cache
 from pathlib import Path
 
@@ -52,6 +61,9 @@ PACKAGE = "study"
 OPTIONAL_PACKAGES = ("study.doctor", "study.identify.with_effects", "study.identify.effects", "study.records_run",
                      "study.diagnose", "study.figures", "study.reality_check", "study.results", "study.app",
                      "study.simulate", "study.fingerprint", "study.store", "study.executor", "study.api")
+
+#: How a Python file is hashed (stored as ``code['scheme']``): its executed source, :func:`executed_source`.
+SCHEME = "executed"
 
 COMPONENTS = ("simulator", "model", "structure", "estimator", "pipeline")
 #: Hex digits kept of each file's hash in a record (48 bits: a collision between two versions of one file is
@@ -160,11 +172,64 @@ def _read(path: Path) -> str:
     return path.read_bytes().decode("utf-8", errors="surrogateescape")
 
 
+def _digest(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()[:FILE_DIGITS]
+
+
+@lru_cache(maxsize=None)
+def file_bytes_hash(path: Path) -> str:
+    """sha256 of a file's contents with CRLF and CR line endings made LF (first :data:`FILE_DIGITS` hex digits):
+    how every file was hashed before :data:`SCHEME`, and how YAML still is."""
+    return _digest(path.read_bytes().replace(b"\r\n", b"\n").replace(b"\r", b"\n"))
+
+
 @lru_cache(maxsize=None)
 def file_hash(path: Path) -> str:
-    """sha256 of a file's contents with CRLF and CR line endings made LF (first :data:`FILE_DIGITS` hex digits)."""
-    data = path.read_bytes().replace(b"\r\n", b"\n").replace(b"\r", b"\n")
-    return hashlib.sha256(data).hexdigest()[:FILE_DIGITS]
+    """sha256 of what a file contributes to a run: a Python module's :func:`executed_source`, any other file's
+    contents (line endings made LF; first :data:`FILE_DIGITS` hex digits)."""
+    if path.suffix != ".py":
+        return file_bytes_hash(path)
+    return _digest(executed_source(_read(path).replace("\r\n", "\n").replace("\r", "\n")).encode(
+        "utf-8", errors="surrogateescape"))
+
+
+def executed_source(text: str) -> str:
+    """``text`` (a module's source) without what Python does not execute: comments, statements that are a bare
+    string (docstrings), blank lines and trailing spaces. A source that does not parse is returned whole (hashed
+    as it is). Indentation and line breaks are kept: they are syntax."""
+    lines = text.split("\n")
+    try:
+        tree = ast.parse(text)
+        tokens = list(tokenize.generate_tokens(io.StringIO(text).readline))
+    except (SyntaxError, tokenize.TokenError, ValueError):
+        return text
+    drop: dict = {}  # line index -> [(first column, last column + 1)] in characters
+
+    def cut(r0: int, c0: int, r1: int, c1: int) -> None:
+        for r in range(r0, r1 + 1):
+            drop.setdefault(r - 1, []).append((c0 if r == r0 else 0, c1 if r == r1 else len(lines[r - 1])))
+
+    def chars(row: int, byte_col: int) -> int:  # ast's columns count UTF-8 bytes, tokenize's characters
+        return len(lines[row - 1].encode("utf-8", errors="surrogateescape")[:byte_col].decode("utf-8", "ignore"))
+
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant) and isinstance(node.value.value, str):
+            cut(node.lineno, chars(node.lineno, node.col_offset), node.end_lineno,
+                chars(node.end_lineno, node.end_col_offset))
+    for tok in tokens:
+        if tok.type == tokenize.COMMENT:
+            cut(tok.start[0], tok.start[1], tok.end[0], tok.end[1])
+    out = []
+    for i, line in enumerate(lines):
+        if i in drop:
+            keep = [True] * len(line)
+            for a, b in drop[i]:
+                keep[a:b] = [False] * (b - a)
+            line = "".join(ch for ch, k in zip(line, keep) if k)
+        line = line.rstrip()
+        if line.strip():
+            out.append(line)
+    return "\n".join(out)
 
 
 def _key(path: Path) -> str:
@@ -251,11 +316,11 @@ def entries(config: dict) -> dict:
 
 
 @lru_cache(maxsize=256)
-def _fingerprint_of(spec: tuple) -> tuple:
+def _fingerprint_of(spec: tuple, hasher=file_hash) -> tuple:
     files, comps = {}, {}
     for name, mods, extra in spec:
-        own = {_key(p): file_hash(p) for p in (_module_file(m) for m in closure(mods)) if p is not None}
-        own.update({key: file_hash(p) for key, p in extra})
+        own = {_key(p): hasher(p) for p in (_module_file(m) for m in closure(mods)) if p is not None}
+        own.update({key: hasher(p) for key, p in extra})
         comps[name] = _combine(own)
         files.update(own)
     return _combine(comps), tuple(sorted(comps.items())), tuple(sorted(files.items()))
@@ -273,7 +338,16 @@ def code_fingerprint(config: dict) -> dict:
     """
     spec = tuple((name, mods, extra) for name, (mods, extra) in entries(config).items())
     fp, comps, files = _fingerprint_of(spec)
-    return {"fingerprint": fp, "components": dict(comps), "files": dict(files)}
+    fp_bytes, comps_bytes, _ = _fingerprint_of(spec, file_bytes_hash)
+    return {"scheme": SCHEME, "fingerprint": fp, "components": dict(comps), "files": dict(files),
+            "bytes": {"fingerprint": fp_bytes, "components": dict(comps_bytes)}}
+
+
+def same_code(stored_fingerprint, current: dict) -> bool:
+    """Whether a table's ``code_fingerprint`` is the current code's, under either hashing (a run recorded before
+    :data:`SCHEME` holds the bytes' fingerprint)."""
+    return stored_fingerprint is not None and stored_fingerprint in (
+        current["fingerprint"], (current.get("bytes") or {}).get("fingerprint"))
 
 
 def changed_components(stored: dict | None, current: dict) -> list:
@@ -281,6 +355,8 @@ def changed_components(stored: dict | None, current: dict) -> list:
     a record without a fingerprint, ``[]`` when unchanged)."""
     if not isinstance(stored, dict) or not isinstance(stored.get("components"), dict):
         return ["unknown"]
+    if stored.get("scheme") != current.get("scheme") and isinstance(current.get("bytes"), dict):
+        current = current["bytes"]  # recorded before the executed-source hashing: compared on the files' bytes
     if stored.get("fingerprint") == current["fingerprint"]:
         return []
     old, new = stored["components"], current["components"]
@@ -289,5 +365,5 @@ def changed_components(stored: dict | None, current: dict) -> list:
 
 def clear_cache() -> None:
     """Forget every file read and hash (for a process that edits the source it fingerprints: tests)."""
-    for f in (_module_file, _imports, closure, _read, file_hash, _fingerprint_of):
+    for f in (_module_file, _imports, closure, _read, file_hash, file_bytes_hash, _fingerprint_of):
         f.cache_clear()

@@ -719,29 +719,42 @@ def test_fingerprint_follows_the_source_of_the_components_a_run_uses(tmp_path, m
             p = copy / rel
             p.write_bytes(p.read_bytes() + text.encode())
 
-        edit("study/identify/estimators/svr.py", "\n# a fix\n")
+        edit("study/identify/estimators/svr.py", "\n_FIX = 1\n")
         after = fps()
         assert after["estimator=svr_eps"]["fingerprint"] != before["estimator=svr_eps"]["fingerprint"]
         assert fingerprint.changed_components(before["estimator=svr_eps"], after["estimator=svr_eps"]) == \
             ["estimator"]
         for k in ("", "vessel=mariner", "model.effects=[current]"):
             assert after[k] == before[k], k
-        edit("study/sim/abkowitz.py", "\n# a fix\n")
+        edit("study/sim/abkowitz.py", "\n_FIX = 1\n")
         after2 = fps()
         assert fingerprint.changed_components(after["vessel=mariner"], after2["vessel=mariner"]) == ["simulator"]
         assert after2[""] == before[""]
-        edit("study/identify/fit.py", "\n# a fix\n")  # one identification: imported by the pipeline
+        edit("study/identify/fit.py", "\n_FIX = 1\n")  # one identification: imported by the pipeline
         after3 = fps()
         assert fingerprint.changed_components(after2[""], after3[""]) == ["pipeline"]
-        edit("study/identify/models.py", "\n# a fix\n")  # what is identified: the model, and the pipeline imports it
+        edit("study/identify/models.py", "\n_FIX = 1\n")  # what is identified: the model, and the pipeline imports it
         after4 = fps()
         assert fingerprint.changed_components(after3[""], after4[""]) == ["model", "pipeline"]
-        edit("study/store/store.py", "\n# not part of any run\n")
+        edit("study/store/store.py", "\n_NOT_PART_OF_ANY_RUN = 1\n")
         assert fps() == after4
         # line endings do not matter (a Windows checkout), contents do
         mmg = copy / "study/sim/mmg.py"
         mmg.write_bytes(mmg.read_bytes().replace(b"\n", b"\r\n"))
         assert fps() == after4
+        # documenting a component leaves its runs current: comments, docstrings, blank lines are not executed
+        edit("study/identify/models.py", '\n\n# a note\n"""a string statement"""\n')
+        fit = copy / "study/identify/fit.py"
+        fit.write_text(fit.read_text().replace('"""', '"""Reworded. ', 1))
+        after5 = fps()
+        assert after5[""]["fingerprint"] == after4[""]["fingerprint"]
+        assert after5[""]["bytes"]["fingerprint"] != after4[""]["bytes"]["fingerprint"]
+        # a record written before that rule holds the bytes' fingerprint: current until any byte changes
+        legacy = {k: after4[""]["bytes"][k] for k in ("fingerprint", "components")}
+        assert fingerprint.changed_components(legacy, after4[""]) == []
+        assert fingerprint.changed_components(legacy, after5[""]) == ["model", "pipeline"]
+        assert fingerprint.same_code(legacy["fingerprint"], after4[""])
+        assert not fingerprint.same_code(legacy["fingerprint"], after5[""])
     finally:
         fingerprint.clear_cache()
 
@@ -827,7 +840,7 @@ def test_app_recomputes_a_run_after_its_estimator_changed(tmp_path):
 
     def edit(rel):
         with open(repo / rel, "a") as fh:
-            fh.write("\n# a fix\n")
+            fh.write("\n_FIX = 1\n")
 
     assert "resumed" not in run()
     edit("study/identify/estimators/svr.py")  # not used by this run (estimator ls)

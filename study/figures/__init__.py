@@ -188,9 +188,9 @@ def code_status(runs: pd.DataFrame) -> dict:
 
     if not len(runs):
         return {"runs": 0, "current": 0, "stale": 0, "revisions": {}}
-    now = [fingerprint.code_fingerprint(run_config(row))["fingerprint"] for _, row in runs.iterrows()]
+    now = [fingerprint.code_fingerprint(run_config(row)) for _, row in runs.iterrows()]
     stored = runs["code_fingerprint"] if "code_fingerprint" in runs else pd.Series(None, index=runs.index)
-    current = int(sum(a == b for a, b in zip(stored, now)))
+    current = int(sum(fingerprint.same_code(a, b) for a, b in zip(stored, now)))
     revs = runs["prov_git_rev"].fillna("unknown").value_counts() if "prov_git_rev" in runs else pd.Series(dtype=int)
     return {"runs": int(len(runs)), "current": current, "stale": int(len(runs) - current),
             "revisions": {str(k): int(v) for k, v in revs.items()}}

@@ -271,7 +271,8 @@ def _divergences(r: dict) -> list[dict]:
             v = _float(s.get("validation_error"))
             if not recs and v is not None and math.isinf(v):
                 recs = ["?"]
-            add(f"ladder step {s.get('step')}{' (rejected)' if s.get('rejected') else ''}", recs, f"step {s.get('step')}")
+            tag = " (rejected)" if s.get("rejected") else ""
+            add(f"ladder step {s.get('step')}{tag}", recs, f"step {s.get('step')}")
     for step, recs in r.get("diverged", {}).items():
         if step != "baseline":
             add(f"ladder step {step}", _recs(recs), f"step {step}")

@@ -52,7 +52,8 @@ def _turn(t: Mapping) -> dict:
                 "carriers": _carriers(_dict(d).get("carriers"))} for m, d in _dict(t.get("metrics")).items()]
     return {"maneuver": "" if t.get("maneuver") is None else str(t.get("maneuver")), "why": None,
             "extrapolates": text.startswith("EXTRAPOLATES"), "text": text, "distance": num(ex.get("distance"), 3),
-            "u0": num(t.get("u0")), "n": num(t.get("n")), "left_out": ", ".join(map(str, t.get("setup_left_out") or [])),
+            "u0": num(t.get("u0")), "n": num(t.get("n")),
+            "left_out": ", ".join(map(str, t.get("setup_left_out") or [])),
             "metrics": metrics, "alternatives": ", ".join(_words(t.get("alternatives"))) or "none"}
 
 

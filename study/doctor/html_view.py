@@ -203,10 +203,10 @@ def errors(r: dict) -> dict | None:
             change = change if change.startswith("-") else "+" + change
         else:
             change = NA
+        cells = [err(e.get("baseline_rmse"), db), err(e.get("final_rmse"), df), err(e.get("baseline_nrmse"), db),
+                 err(e.get("final_nrmse"), df)]
         rows.append({"record": _text(e.get("record")), "channel": _text(e.get("channel")),
-                     "unit": _text(e.get("unit")), "cells": [err(e.get("baseline_rmse"), db), err(e.get("final_rmse"), df),
-                                                             err(e.get("baseline_nrmse"), db),
-                                                             err(e.get("final_nrmse"), df)], "change": change})
+                     "unit": _text(e.get("unit")), "cells": cells, "change": change})
     if not rows:
         return None
     extra = [("RMSE", "root-mean-square error of the replayed channel, in the channel's unit"),

@@ -1,7 +1,9 @@
 """The doctor's report written: the figures, ``report.json`` and ``report.html`` of a finished diagnosis
 (:func:`write_report`), with what goes into them beside the ranking and the ladder (:mod:`.diagnose`): each
 record's replays, the worst windows, the manoeuvre metrics of each candidate, the conventions and definitions,
-the catalogue and the provenance (package, git revision, command line, date, each record's sha256)."""
+the catalogue and the provenance (package, git revision, command line, date, each record's sha256).
+
+``doctor`` is a finished :class:`.diagnose.Doctor` (not imported here: the diagnosis is the layer above)."""
 from __future__ import annotations
 
 import math
@@ -47,7 +49,7 @@ def worst_windows(curves: list, n: int = 3) -> list:
     return cands[:n]
 
 
-def predictions(doctor: "Doctor", ev: "Evaluation") -> dict:
+def predictions(doctor, ev) -> dict:
     """Each validation record's prediction by an evaluation's model (the fold's model when held out)."""
     out = {}
     if doctor.mode == "given":
@@ -60,7 +62,7 @@ def predictions(doctor: "Doctor", ev: "Evaluation") -> dict:
     return out
 
 
-def manoeuvre_predictions(doctor: "Doctor", ev: "Evaluation", whole: dict) -> dict:
+def manoeuvre_predictions(doctor, ev, whole: dict) -> dict:
     """The replays the manoeuvre metrics compare: a record whose manoeuvre starts after an approach
     (``maneuver_metrics.manoeuvre_start``) replayed from the measured state at that start; any other record's
     whole-record replay (``whole``, from :func:`predictions`)."""
@@ -88,7 +90,7 @@ def _metrics_error(rows: list, col: str) -> tuple:
     return (float(np.mean(errs)) if errs else math.nan), len(errs)
 
 
-def candidate_metrics(doctor: "Doctor", rep: dict, meas: dict, mb: dict) -> None:
+def candidate_metrics(doctor, rep: dict, meas: dict, mb: dict) -> None:
     """Beside each ranked candidate's validation error, its effect on the validation manoeuvres' metrics (tactical
     diameter, advance, overshoots...: ``study.maneuver_metrics``): the mean relative error of the metrics the
     baseline and the candidate can both be measured on, and a note when the candidate lowers the NRMSE but worsens
@@ -120,7 +122,7 @@ def candidate_metrics(doctor: "Doctor", rep: dict, meas: dict, mb: dict) -> None
                 f"{100 * e1:.1f} % over {n}; worse: {', '.join(worse[:4])}{', ...' if len(worse) > 4 else ''})")
 
 
-def write_report(doctor: "Doctor", out_dir, vessel: str, model: str, overwrite: bool = False) -> dict:
+def write_report(doctor, out_dir, vessel: str, model: str, overwrite: bool = False) -> dict:
     """Write ``report.json``, ``report.html`` and the figures (``figures/*.png``) into ``out_dir``; returns the
     report. Refuses to replace an existing report unless ``overwrite``."""
     import json
@@ -271,7 +273,7 @@ def git_revision() -> dict:
         return {"revision": None, "modified": None}
 
 
-def provenance(doctor: "Doctor", command: str | None = None) -> dict:
+def provenance(doctor, command: str | None = None) -> dict:
     """What made the report: package and version, git revision, command line, date (UTC), and each record's
     sha256 (its file's bytes when the report is written; a record without a file: its data as CSV)."""
     import shlex
@@ -297,7 +299,7 @@ def provenance(doctor: "Doctor", command: str | None = None) -> dict:
             "date": datetime.now(timezone.utc).isoformat(timespec="seconds"), "records": records}
 
 
-def catalogue_rows(doctor: "Doctor") -> list:
+def catalogue_rows(doctor) -> list:
     """The catalogue of the doctor's candidate effects: physics, parameters with units, how each enters, source,
     and why it could not act here (if so)."""
     out = []

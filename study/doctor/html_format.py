@@ -62,6 +62,9 @@ def normalise(report: Any) -> dict:
                 v = [str(x) for x in v if x is not None and str(x) != ""]
         elif k in _DICTS:
             v = {str(a): b for a, b in v.items()} if isinstance(v, Mapping) else None
+            if v is not None and k == "provenance":  # its records: rows too
+                recs = v.get("records")
+                v["records"] = [x for x in recs if isinstance(x, Mapping)] if isinstance(recs, (list, tuple)) else []
         elif isinstance(v, (list, tuple, Mapping)):
             v = None
         elif v is not None and not isinstance(v, str):

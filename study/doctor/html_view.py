@@ -160,7 +160,7 @@ def ranking(r: dict) -> dict | None:
         cls = "candidate significant" if sig else "candidate"
         cls += " diverged-row" if div else ""
         cls += " chosen" if missing is not None and str(c.get("effect")) == str(missing) else ""
-        mt = c.get("metrics") if isinstance(c.get("metrics"), Mapping) else {}
+        mt = c.get("metrics") or {}
         e0, e1 = _finite(mt.get("baseline_error")), _finite(mt.get("error"))
         rows.append({"cls": cls, "effect": _text(c.get("effect")), "validation": err(c.get("validation_error"), div),
                      "on": _known(div_recs) if div else [], "improvement": pct(c.get("improvement"), div),
@@ -389,7 +389,7 @@ def notes(r: dict) -> dict | None:
 
 def _param_table(r: dict) -> dict | None:
     """Baseline and final parameters side by side, each with its unit."""
-    b, f = (x if isinstance(x := r.get(k, {}).get("parameters"), Mapping) else {} for k in ("baseline", "final"))
+    b, f = (r.get(k, {}).get("parameters") or {} for k in ("baseline", "final"))
     if not b and not f:
         return None
     units = r.get("units", {})
@@ -429,15 +429,14 @@ def provenance(r: dict) -> dict | None:
     p = r.get("provenance", {})
     if not p:
         return None
-    s = lambda k: p[k].strip() if isinstance(p.get(k), str) else ""  # noqa: E731
+    s = lambda k: _text(p.get(k)).strip()  # noqa: E731
     rev = s("revision") + (" (with local changes to tracked files)" if s("revision") and p.get("modified") is True
                            else "")
     rows = [{"label": label, "text": val, "code": code} for label, val, code in (
         ("Package", f"{s('package')} {s('version')}".strip(), False),
         ("Git revision", rev or "not a git checkout", True), ("Command line", s("command"), True),
         ("Date (UTC)", s("date"), False)) if val]
-    recs = [{k: _text(x.get(k)) for k in ("role", "name", "sha256", "sha256_of")} for x in p.get("records") or []
-            if isinstance(x, Mapping)] if isinstance(p.get("records"), (list, tuple)) else []
+    recs = [{k: _text(x.get(k)) for k in ("role", "name", "sha256", "sha256_of")} for x in p.get("records", [])]
     return _section("provenance", rows=rows, records=recs)
 
 

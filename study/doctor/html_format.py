@@ -79,7 +79,7 @@ def normalise(report: Any) -> dict:
 # --------------------------------------------------------------------------------------------- formatting
 
 
-def _float(x: Any) -> float | None:
+def as_float(x: Any) -> float | None:
     """``x`` as a float, or None when it is not a number (bools are not numbers here)."""
     if x is None or isinstance(x, bool):
         return None
@@ -89,15 +89,15 @@ def _float(x: Any) -> float | None:
         return None
 
 
-def _finite(x: Any) -> float | None:
-    v = _float(x)
+def finite(x: Any) -> float | None:
+    v = as_float(x)
     return v if v is not None and math.isfinite(v) else None
 
 
 def fmt_num(x: Any, digits: int = 4) -> str:
     """A number with ``digits`` significant digits; NaN, None and non-numbers -> ``"n/a"``. ``inf`` stays
     ``"inf"`` here; the page never shows it (an infinite error is a diverged replay, see :func:`err`)."""
-    v = _float(x)
+    v = as_float(x)
     if v is None or math.isnan(v):
         return NA
     if math.isinf(v):
@@ -107,7 +107,7 @@ def fmt_num(x: Any, digits: int = 4) -> str:
 
 def fmt_pct(frac: Any, decimals: int = 1) -> str:
     """A fraction as a percentage (0.62 -> ``"62.0 %"``); NaN, None and non-numbers -> ``"n/a"``."""
-    v = _float(frac)
+    v = as_float(frac)
     if v is None or math.isnan(v):
         return NA
     if math.isinf(v):
@@ -117,25 +117,25 @@ def fmt_pct(frac: Any, decimals: int = 1) -> str:
 
 def num(x: Any, digits: int = 4) -> str:
     """A number as the page shows it: never ``inf`` (-> n/a)."""
-    v = _finite(x)
+    v = finite(x)
     return NA if v is None else fmt_num(v, digits)
 
 
 def err(x: Any, diverged: bool = False) -> str:
     """An error figure: ``diverged`` when the replay diverged or the value is infinite, else :func:`num`."""
-    v = _float(x)
+    v = as_float(x)
     return DIVERGED if diverged or (v is not None and math.isinf(v)) else num(x)
 
 
 def pct(x: Any, diverged: bool = False) -> str:
     if diverged:
         return DIVERGED
-    v = _finite(x)
+    v = finite(x)
     return NA if v is None else fmt_pct(v)
 
 
 def fmt_p(p: Any) -> str:
-    v = _float(p)
+    v = as_float(p)
     if v is None or math.isnan(v):
         return NA
     return "< 0.001" if v < 1e-3 else f"{v:.2g}"
@@ -157,16 +157,16 @@ def interval(low: Any, high: Any) -> list[str] | None:
     return None if lo is None or hi is None else [fmt_num(lo), fmt_num(hi)]
 
 
-def _text(x: Any) -> str:
+def as_text(x: Any) -> str:
     return "" if x is None else str(x)
 
 
-def _value(v: Any) -> str:
+def param_value(v: Any) -> str:
     """A parameter's value: a number to 4 significant digits (n/a when NaN or infinite), a word as it is."""
-    return v if isinstance(v, str) and _float(v) is None else num(v)
+    return v if isinstance(v, str) and as_float(v) is None else num(v)
 
 
-def _recs(x: Any) -> list[str]:
+def records_of(x: Any) -> list[str]:
     """Record names from a ``diverged`` entry (a list of names; a bare True is "some record", ``?``)."""
     if x is True:
         return ["?"]
@@ -177,11 +177,11 @@ def _recs(x: Any) -> list[str]:
     return [str(a) for a in x if a is not None and str(a) != ""]
 
 
-def _known(recs: list[str]) -> list[str]:
+def known(recs: list[str]) -> list[str]:
     return [x for x in recs if x != "?"]
 
 
-def _names(xs: Any) -> list[str]:
+def names(xs: Any) -> list[str]:
     xs = [xs] if isinstance(xs, str) else xs if isinstance(xs, (list, tuple)) else []
     return [str(x) for x in xs if x is not None and str(x) != ""]
 
@@ -200,24 +200,24 @@ def unit(name: Any, units: Mapping, notes: dict | None = None) -> dict | None:
     return {"text": u if u.startswith("(") else f"[{u}]", "sup": None}
 
 
-def _unit_notes(notes: Mapping) -> list:
+def unit_notes(notes: Mapping) -> list:
     return [{"sup": k, "text": t} for t, k in notes.items()]
 
 
-def _params(p: Any, units: Mapping, notes: dict | None = None) -> list:
+def param_items(p: Any, units: Mapping, notes: dict | None = None) -> list:
     """Parameters as ``{name, value, unit}``, 4 significant digits."""
-    return [{"name": str(k), "value": _value(v), "unit": unit(k, units, notes)}
+    return [{"name": str(k), "value": param_value(v), "unit": unit(k, units, notes)}
             for k, v in (p.items() if isinstance(p, Mapping) else ())]
 
 
-def _defs(r: dict, terms: Iterable[str], extra: Iterable[tuple[str, str]] = ()) -> list:
+def footnote(r: dict, terms: Iterable[str], extra: Iterable[tuple[str, str]] = ()) -> list:
     """A footnote under a table: the report's definitions of ``terms`` (those it has), then ``extra``."""
     d = r.get("definitions", {})
     items = [(t, d[t]) for t in terms if isinstance(d.get(t), str) and d[t].strip()] + [(t, x) for t, x in extra if x]
     return [{"term": t, "text": str(x).rstrip(". ")} for t, x in items]
 
 
-def _pdef(r: dict, term: str) -> dict | None:
+def definition(r: dict, term: str) -> dict | None:
     x = r.get("definitions", {}).get(term)
     return {"term": term, "text": x.rstrip(". ")} if isinstance(x, str) and x else None
 
@@ -225,29 +225,29 @@ def _pdef(r: dict, term: str) -> dict | None:
 # --------------------------------------------------------------------------------------------- divergence
 
 
-def _base_diverged(r: dict) -> list[str]:
+def base_diverged(r: dict) -> list[str]:
     """Validation records on which the baseline's replay diverged (wherever the report says so)."""
-    out = _recs(r.get("baseline", {}).get("diverged")) + _recs(r.get("diverged", {}).get("baseline"))
+    out = records_of(r.get("baseline", {}).get("diverged")) + records_of(r.get("diverged", {}).get("baseline"))
     out += [str(e["record"]) for e in r.get("errors_table", []) if e.get("baseline_diverged") is True
             and e.get("record") is not None]
     steps = r.get("ladder", [])
     if steps and str(steps[0].get("step", "baseline")) == "baseline":
-        out += _recs(steps[0].get("diverged"))
+        out += records_of(steps[0].get("diverged"))
     return list(dict.fromkeys(out))
 
 
-def _final_diverged(r: dict) -> list[str]:
-    out = _recs(r.get("final", {}).get("diverged"))
+def final_diverged(r: dict) -> list[str]:
+    out = records_of(r.get("final", {}).get("diverged"))
     out += [str(e["record"]) for e in r.get("errors_table", []) if e.get("final_diverged") is True
             and e.get("record") is not None]
     return list(dict.fromkeys(out))
 
 
-def _verdict_diverged(r: dict) -> bool:
-    return (r.get("verdict") or "").strip().lower().startswith("diverged") or bool(_base_diverged(r))
+def verdict_diverged(r: dict) -> bool:
+    return (r.get("verdict") or "").strip().lower().startswith("diverged") or bool(base_diverged(r))
 
 
-def _no_final_model(r: dict) -> bool:
+def no_final_model(r: dict) -> bool:
     """True when the report says no effect was added (so no "model with the effects" is drawn anywhere)."""
     fin, base = r.get("final", {}).get("effects"), r.get("baseline", {}).get("effects")
     if isinstance(fin, list) and isinstance(base, list):
@@ -256,7 +256,7 @@ def _no_final_model(r: dict) -> bool:
     return bool(steps) and not any(s.get("rejected") is not True for s in steps[1:])
 
 
-def _divergences(r: dict) -> list[dict]:
+def divergences(r: dict) -> list[dict]:
     """``{what, on}`` of every replay that diverged: the baseline, each ladder step, the final model, each
     candidate of the ranking (``on``: the records named)."""
     out, seen = [], set()
@@ -265,49 +265,49 @@ def _divergences(r: dict) -> list[dict]:
         key = what if key is None else key
         if recs and key not in seen:
             seen.add(key)
-            out.append({"what": what, "on": _known(recs)})
+            out.append({"what": what, "on": known(recs)})
 
-    add("the baseline model", _base_diverged(r))
+    add("the baseline model", base_diverged(r))
     for s in r.get("ladder", []):
         if str(s.get("step")) != "baseline":
-            recs = _recs(s.get("diverged"))
-            v = _float(s.get("validation_error"))
+            recs = records_of(s.get("diverged"))
+            v = as_float(s.get("validation_error"))
             if not recs and v is not None and math.isinf(v):
                 recs = ["?"]
             tag = " (rejected)" if s.get("rejected") else ""
             add(f"ladder step {s.get('step')}{tag}", recs, f"step {s.get('step')}")
     for step, recs in r.get("diverged", {}).items():
         if step != "baseline":
-            add(f"ladder step {step}", _recs(recs), f"step {step}")
-    if not _no_final_model(r):  # else it is the baseline, said above
-        add("the final model", _final_diverged(r))
+            add(f"ladder step {step}", records_of(recs), f"step {step}")
+    if not no_final_model(r):  # else it is the baseline, said above
+        add("the final model", final_diverged(r))
     for c in r["ranking"] if "ranking" in r else []:
-        if c.get("diverged") is True or _recs(c.get("diverged_records")):
-            add(f"candidate {c.get('effect')}", _recs(c.get("diverged_records")) or ["?"])
+        if c.get("diverged") is True or records_of(c.get("diverged_records")):
+            add(f"candidate {c.get('effect')}", records_of(c.get("diverged_records")) or ["?"])
     return out
 
 
-def _step_diverged(s: Mapping, i: int, r: dict) -> bool:
-    v = _float(s.get("validation_error"))
-    if _recs(s.get("diverged")) or (v is not None and math.isinf(v)):
+def step_diverged(s: Mapping, i: int, r: dict) -> bool:
+    v = as_float(s.get("validation_error"))
+    if records_of(s.get("diverged")) or (v is not None and math.isinf(v)):
         return True
-    return i == 0 and str(s.get("step", "baseline")) == "baseline" and bool(_base_diverged(r))
+    return i == 0 and str(s.get("step", "baseline")) == "baseline" and bool(base_diverged(r))
 
 
-def _stability(r: dict) -> dict[int, Mapping]:
+def stability_by_step(r: dict) -> dict[int, Mapping]:
     out: dict[int, Mapping] = {}
     for s in r.get("stability", []):
-        step = _finite(s.get("step"))
+        step = finite(s.get("step"))
         if step is not None:
             out.setdefault(int(step), s)
     return out
 
 
-def _named_in(s: Mapping | None, long: bool = False) -> str:
+def named_in(s: Mapping | None, long: bool = False) -> str:
     """``named in k of n`` of a stability entry (its text when k/n are missing); empty without one."""
     if s is None:
         return ""
-    k, n = _finite(s.get("k")), _finite(s.get("n"))
+    k, n = finite(s.get("k")), finite(s.get("n"))
     if k is not None and n is not None:
         return f"named in {int(k)} of {int(n)}" + (" with one validation record left out" if long else "")
     t = s.get("text")

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from .html_format import _text, interval, num
+from .html_format import as_text, interval, num
 
 PARTS = (("s_id", "identification"), ("s_struct", "structure"), ("s_extrap", "extrapolation"))
 
@@ -21,28 +21,28 @@ def _real(x) -> bool:
 def _spread(u: Mapping) -> dict:
     """The interval's parts (sd of the log of each source), why it is so wide, and its caveat."""
     parts = ", ".join(f"{name} {100 * u[k]:.1f} %" if _real(u.get(k)) else f"{name} n/a" for k, name in PARTS)
-    return {"parts": parts, "why": _text(u.get("why")), "caveat": _text(u.get("caveat"))}
+    return {"parts": parts, "why": as_text(u.get("why")), "caveat": as_text(u.get("caveat"))}
 
 
 def _carriers(cs) -> list[str]:
-    return [_text(c.get("sentence")) for c in cs or []]
+    return [as_text(c.get("sentence")) for c in cs or []]
 
 
 def _turn(t: Mapping) -> dict:
     if t.get("why"):
-        return {"maneuver": _text(t.get("maneuver")), "why": str(t["why"])}
+        return {"maneuver": as_text(t.get("maneuver")), "why": str(t["why"])}
     ex = t.get("extrapolation") or {}
     metrics = [{"metric": str(m), "value": num(d.get("value")), "interval": interval(d.get("low"), d.get("high")),
                 **_spread(d), "carriers": _carriers(d.get("carriers"))} for m, d in (t.get("metrics") or {}).items()]
-    return {"maneuver": _text(t.get("maneuver")), "why": None, "text": _text(ex.get("text")),
-            "extrapolates": _text(ex.get("text")).startswith("EXTRAPOLATES"), "distance": num(ex.get("distance"), 3),
+    return {"maneuver": as_text(t.get("maneuver")), "why": None, "text": as_text(ex.get("text")),
+            "extrapolates": as_text(ex.get("text")).startswith("EXTRAPOLATES"), "distance": num(ex.get("distance"), 3),
             "u0": num(t.get("u0")), "n": num(t.get("n")),
             "left_out": ", ".join(map(str, t.get("setup_left_out") or [])),
             "metrics": metrics, "alternatives": ", ".join(map(str, t.get("alternatives") or [])) or "none"}
 
 
 def _validation(r: Mapping, sec: Mapping) -> dict | None:
-    recs = [{"record": str(n), "text": _text(x.get("text"))}
+    recs = [{"record": str(n), "text": as_text(x.get("text"))}
             for n, x in ((sec.get("final") or {}).get("records") or {}).items()]
     rows = []
     for m in r.get("maneuver_metrics", []):
@@ -64,8 +64,9 @@ def _calibration(sec: Mapping) -> list:
         g = cal.get("growth") or {}
         if not g:
             continue
-        out.append({"role": role, "sigma0": num(g.get("sigma0"), 3), "k": num(g.get("k"), 3), "n": _text(g.get("n")),
-                    "pairs": len(cal.get("pairs") or []), "d_max": num(g.get("d_max"), 3), "note": _text(g.get("note")),
+        out.append({"role": role, "sigma0": num(g.get("sigma0"), 3), "k": num(g.get("k"), 3),
+                    "n": as_text(g.get("n")), "pairs": len(cal.get("pairs") or []), "d_max": num(g.get("d_max"), 3),
+                    "note": as_text(g.get("note")),
                     "alternatives": ", ".join(map(str, part.get("alternatives") or [])),
                     "excluded": "; ".join(map(str, part.get("excluded") or [])),
                     "notes": [str(n) for n in part.get("notes") or []]})
@@ -79,4 +80,4 @@ def uncertainty_view(r: Mapping) -> dict | None:
         return None
     return {"summary": [str(s) for s in sec.get("summary") or []],
             "turns": [_turn(t) for t in sec.get("predicted_turns") or []], "validation": _validation(r, sec),
-            "calibration": _calibration(sec), "method": _text(sec.get("method"))}
+            "calibration": _calibration(sec), "method": as_text(sec.get("method"))}

@@ -68,8 +68,8 @@ def render_html(report: Mapping | None, figures: Mapping[str, bytes] | None = No
     ``report`` is the dict written to ``report.json`` (any key may be missing); ``figures`` maps a figure's file
     name (as in ``report["figures"][i]["file"]``) to its PNG bytes, embedded as data URIs.
     """
-    return environment().get_template("report.html.j2").render(**view(report, figures), css=_css(),
-                                                                        csp=Markup(CSP))
+    page = environment().get_template("report.html.j2")
+    return page.render(**view(report, figures), css=_css(), csp=Markup(CSP))  # both the package's own
 
 
 def metrics_table_html(rows: list[dict]) -> str:

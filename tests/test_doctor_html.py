@@ -1,6 +1,7 @@
-"""The model doctor's HTML report (study/doctor/html.py): a self-contained page, every string escaped, every
-figure embedded, robust to missing keys; and, in a real headless Chromium (Debian's ``chromium`` and
-``chromium-driver``, driven by Selenium), the figures and the ranking actually render.
+"""The model doctor's HTML report (study/doctor/html.py and its templates): a self-contained page, every string
+escaped, every figure embedded, robust to missing keys, every link of its contents to an anchor on the page; and,
+in a real headless Chromium (Debian's ``chromium`` and ``chromium-driver``, driven by Selenium), the figures and
+the ranking actually render.
 
 The browser test is skipped when Chromium, chromedriver or Selenium is missing, unless STUDY_REQUIRE_BROWSER=1
 (set by .ci/run once it has installed them), in which case it fails instead of silently skipping."""
@@ -466,7 +467,7 @@ def test_definitions_under_each_table_and_conventions_on_top(figures):
 
 def test_maneuver_metrics_section(figures):
     page = render_html(_report(), figures)
-    assert "Manoeuvres in the ship&#x27;s terms" in page or "Manoeuvres in the ship's terms" in page
+    assert any(f"Manoeuvres in the ship{q}s terms" in page for q in ("'", "&#x27;", "&#39;"))  # escaped or not
     man = _section_html(page, "maneuvers")
     assert man.count('<table class="maneuver-metrics">') == 1
     assert man.count('<td class="record">zz20_port</td>') == 2
@@ -648,3 +649,64 @@ def test_identifiability_section_counts_undetermined_coefficients_and_conflicts_
     assert sec.count('class="undetermined"') == 2
     assert "&lt;b&gt;" in sec and "<b>" not in sec.split("<tbody>")[1].split("</tbody>")[0].replace("<b>ratio", "")
     assert 'id="identifiability"' not in render_html({})
+
+
+# --------------------------------------------------------------------------------------------- the templates
+
+
+def _contents(page: str) -> tuple[list[str], set[str]]:
+    """The table of contents' link targets, in order, and every id on the page."""
+    import re
+
+    toc = page[page.index('<nav id="contents"'):page.index("</nav>")]
+    return re.findall(r'href="#([^"]+)"', toc), set(re.findall(r'\sid="([^"]+)"', page))
+
+
+def test_a_minimal_report_renders_from_the_templates_and_every_contents_link_has_its_anchor():
+    from importlib import resources
+
+    from study.doctor.html import environment
+
+    names = set(environment().list_templates())
+    assert {"report.html.j2", "verdict.html.j2", "ladder.html.j2", "candidates.html.j2", "provenance.html.j2"} <= names
+    rep = {"verdict": "No significant missing effect", "missing_effect": None,
+           "ladder": [{"step": "baseline", "effects": [], "validation_error": 0.5, "training_error": 0.4}],
+           "notes": ["a <note>"]}
+    page = render_html(rep)
+    css = resources.files("study.doctor").joinpath("templates", "report.css").read_text(encoding="utf-8")
+    assert f"<style>{css}</style>" in page  # the package's style sheet, inlined as it is
+    links, ids = _contents(page)
+    assert links == ["verdict", "ladder", "notes"]
+    assert set(links) <= ids and "a &lt;note&gt;" in page
+    for sid in links[1:]:  # each section's heading is the contents' entry
+        assert page.count(f'<section id="{sid}">') == 1
+
+
+def test_a_report_without_an_optional_section_still_renders(figures):
+    """Each optional part of the report left out: its section is absent from the page and from the contents,
+    every other section is still there, and every link of the contents has its anchor."""
+    full = render_html(_report(), figures)
+    links_full, _ = _contents(full)
+    for key, sid in (("worst_windows", "worst"), ("catalogue", "catalogue"), ("maneuver_metrics", "maneuvers"),
+                     ("notes", "notes"), ("errors_table", "errors"), ("definitions", "definitions")):
+        rep = _report()
+        del rep[key]
+        page = render_html(rep, figures)
+        links, ids = _contents(page)
+        assert sid in links_full and sid not in links and f'id="{sid}"' not in page, key
+        assert links == [x for x in links_full if x != sid], key
+        assert set(links) <= ids, key
+
+
+def test_every_contents_link_of_the_committed_examples_has_its_anchor():
+    import json
+    from pathlib import Path
+
+    reports = sorted((Path(__file__).resolve().parents[1] / "paper_figs" / "doctor").glob("*/report.json"))
+    if not reports:
+        pytest.skip("no committed example report")
+    for path in reports:
+        page = render_html(json.loads(path.read_text(encoding="utf-8")), {})
+        links, ids = _contents(page)
+        assert {"verdict", "ladder", "candidates", "provenance"} <= set(links), path
+        assert set(links) <= ids, path

@@ -144,7 +144,7 @@ def claimed(out: Path, overwrite: bool):
                     break
 
 
-#: where the doctor writes its figures before they are moved to ``figures/`` (see diagnose.write_report)
+#: where the doctor writes its figures before they are moved to ``figures/`` (see report.write_report)
 PARTIAL_FIGURES = ".figures.partial"
 
 

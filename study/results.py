@@ -60,7 +60,9 @@ def main(argv: list[str] | None = None) -> int:
     sub = ap.add_subparsers(dest="cmd", required=True)
     for name, help_ in (("rebuild", "rebuild runs.parquet and params.parquet from the records"),
                         ("show", "counts by status and the last 10 runs"),
-                        ("posterior", "an emcee run's posterior: ArviZ's r-hat and ESS, and a netCDF file")):
+                        ("posterior", "an emcee run's posterior: ArviZ's r-hat and ESS, and a netCDF file"),
+                        ("restamp", "give records fingerprinted on their files' bytes the executed-source "
+                                    "fingerprint, where the code is unchanged (then rebuild)")):
         p = sub.add_parser(name, help=help_)
         p.add_argument("--root", "--results", dest="root", default=None,
                        help="results folder (default $STUDY_RESULTS_DIR or results/)")
@@ -79,6 +81,15 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if args.cmd == "posterior":
         return _posterior(store, args.run_id, args.out)
+    if args.cmd == "restamp":
+        from . import fingerprint
+
+        done, left = store.restamp(fingerprint.code_fingerprint,
+                                   lambda old, new: not fingerprint.changed_components(old, new))
+        print(f"{done} record(s) restamped; {left} computed by code that has changed since (re-run them)")
+        runs, _ = store.collect(allow_empty=True)
+        print(f"runs: {store.runs_path.resolve()} ({len(runs)} runs)")
+        return 0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # the same problems are printed from the report below
         try:

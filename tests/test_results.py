@@ -682,6 +682,29 @@ def test_the_table_marks_rows_made_by_other_code(tmp_path):
     assert store.report.stale == 2 and any("changed since" in line for line in store.report.lines())
 
 
+def test_records_hashed_on_bytes_are_restamped_only_where_the_code_is_unchanged(tmp_path, capsys):
+    """A record written before the executed-source fingerprint holds its files' bytes' fingerprint: restamped
+    when today's bytes are the same (the same code ran), left for a re-run when they are not."""
+    from study import fingerprint
+    from study.results import main
+
+    store = ResultStore(tmp_path)
+    now = run_guarded(store, _conf(seed=1), lambda: _result(), seed=1)["code"]
+    legacy = {k: now["bytes"][k] for k in ("fingerprint", "components")}
+    for seed, code in ((2, legacy), (3, {**legacy, "fingerprint": "older",
+                                          "components": {**legacy["components"], "estimator": "older"}})):
+        run_guarded(store, _conf(seed=seed), lambda: _result(), seed=seed, code=code)
+    assert main(["restamp", "--root", str(tmp_path)]) == 0
+    assert "1 record(s) restamped; 1 computed by code that has changed since" in capsys.readouterr().out
+    two, three = store.read(run_id(_conf(seed=2))), store.read(run_id(_conf(seed=3)))
+    assert two["code"]["scheme"] == fingerprint.SCHEME and two["code"]["restamped_from"] == legacy["fingerprint"]
+    assert not fingerprint.changed_components(two["code"], now)
+    assert "scheme" not in three["code"]
+    runs = pd.read_parquet(store.runs_path).set_index("seed")
+    assert bool(runs.loc[2, "code_current"]) and not bool(runs.loc[3, "code_current"])
+    assert store.restamp(fingerprint.code_fingerprint, lambda a, b: True) == (1, 0)  # only 3 was left
+
+
 def test_fingerprint_follows_the_source_of_the_components_a_run_uses(tmp_path, monkeypatch):
     import shutil
 

@@ -335,6 +335,33 @@ class ResultStore:
             atomic_write_bytes(path, data)
         return path
 
+    def restamp(self, current, unchanged) -> tuple[int, int]:
+        """Re-label the code of finished records written under an older hashing of the same code: for each record
+        whose ``code`` has no ``scheme``, ``current(config)`` gives the code dict today and ``unchanged(old, new)``
+        whether the record's code is that code (``study.fingerprint``: the files' bytes are the same); if so the
+        record's ``code`` becomes today's, with the old fingerprint kept as ``code['restamped_from']``. Written
+        atomically under the run's lock; nothing else in the record changes. Returns (restamped, left as they
+        were: computed by other code, to be re-run)."""
+        done = left = 0
+        for path in sorted(self.records_dir.glob("*.json")) if self.records_dir.is_dir() else []:
+            rec, _ = self._read_path(path)
+            code = rec.get("code") if rec is not None else None
+            if rec is None or rec.get("status") not in FINISHED_STATUSES or not isinstance(code, dict) \
+                    or code.get("scheme"):
+                continue
+            new = current(rec["config"])
+            if not unchanged(code, new):
+                left += 1
+                continue
+            with self._lock(rec["run_id"]):
+                fresh, _ = self._read_path(path)
+                if fresh is None or fresh.get("code") != code:  # rewritten meanwhile: leave it to its writer
+                    continue
+                fresh["code"] = {**new, "restamped_from": code.get("fingerprint")}
+                atomic_write_bytes(path, dumps(ordered(fresh), indent=1).encode("utf-8"))
+            done += 1
+        return done, left
+
     def _place_artefacts(self, rid: str, artefacts: dict) -> None:
         # build the folder under a temp name and rename it: the run's folder appears complete or not at all
         self.artefacts_root.mkdir(parents=True, exist_ok=True)

@@ -1,83 +1,13 @@
 """State estimation: u, v, r and their time derivatives from positions and heading, by an extended Kalman
-filter (EKF) and a Rauch-Tung-Striebel (RTS) smoother.
+filter (EKF) and a Rauch-Tung-Striebel (RTS) smoother on a kinematic model (no hydrodynamics).
 
-Sea-trial records usually carry GNSS positions ``x0, y0`` and a heading ``psi``, not the body velocities the
-identification needs. :func:`estimate_states` estimates ``u, v, r`` (body axes, over ground, at the point the
-positions refer to) and ``u_dot, v_dot, r_dot`` from ``x0, y0, psi`` alone, or refines measured ``u, v, r``
-when a record has them (they enter as further measurements). Frames and signs: ``docs/conventions.md``
-(``x0`` north, ``y0`` east, ``psi`` clockwise from north, ``u`` forward, ``v`` to starboard, ``r`` + to
-starboard). Used by ``study.schema.read_record(..., states="auto"|"ekf")`` and by the ``smoothed`` structure
-with ``smoothing.method: rts`` (``study.identify.structures``).
-
-The model (a kinematic model, no hydrodynamics: it holds for any vessel and any effect)
---------------------------------------------------------------------------------------
-State ``[x0, y0, psi, u, v, r, u_dot, v_dot, r_dot]``; continuous time
-
-    x0' = u cos psi - v sin psi,   y0' = u sin psi + v cos psi,   psi' = r,
-    u' = u_dot,  v' = v_dot,  r' = r_dot,   u_dot' = w_u,  v_dot' = w_v,  r_dot' = w_r,
-
-with white jerks ``w`` of spectral densities ``q_uv`` (m^2/s^5, the same for ``u`` and ``v``) and ``q_r``
-(rad^2/s^5): the continuous Wiener-process-acceleration model of Bar-Shalom, Li & Kirubarajan (2001),
-*Estimation with Applications to Tracking and Navigation*, Sec. 6.2.3, in body axes. It is discretised over
-each time step ``h`` by a second-order Taylor step of the kinematics (exact for the yaw and velocity chains;
-the position's local error is ``h^3/6`` times its third derivative), with sub-steps where ``h`` is more than
-1.5 times the record's median step (a dropout) or the heading turns by more than 0.05 rad in a step; the
-process noise of a step is the exact one of the triple integrator (``q h^5/20, q h^4/8, ...``) in the body
-axes frozen at the step's heading. Measurements are the states themselves (``x0, y0, psi`` and, when present,
-``u, v, r``) with independent white Gaussian errors; a missing (NaN) value skips its update (dropouts), and
-non-uniform time steps are handled by the step's own ``h``. Updates are processed one channel at a time
-(valid because the errors are independent; Simon 2006, Sec. 6.1), so no matrix is inverted in the filter.
-
-The smoother is the extended RTS smoother (Rauch, Tung & Striebel 1965, AIAA J. 3(8), 1445-1450, for the
-linear case; extended form: Simon 2006, *Optimal State Estimation*, Sec. 9.4 and 13.2; Sarkka 2013, *Bayesian
-Filtering and Smoothing*, Sec. 9.1): the filter's step Jacobians are reused backwards. The same approach (an
-EKF with an RTS smoother on a kinematic model of model-test positions and heading) is used by M.
-Alexandersson's VesselManoeuvringModels project (Alexandersson, Mao & Ringsberg 2022, "System identification
-of vessel manoeuvring models", Ocean Engineering 266, 112940).
-
-Assumptions (each labelled; the defaults work for a 3 m model and a 320 m ship alike, because none is a
-number in metres or seconds)
-----------------------------------------------------------------------------------------------------------
-- [A1] Positions are those of the reference point whose ``u, v`` are wanted (midship in the package); a GNSS
-  antenna elsewhere adds ``r`` times its lever arm to ``v`` (correct the positions first).
-- [A2] Measurement errors are white, Gaussian and independent between channels. Their standard deviations
-  are absolute numbers per channel (``position_std`` m, ``heading_std`` rad, ``u_std``/``v_std`` m/s,
-  ``r_std`` rad/s). Default ``"auto"``: each is estimated from the record itself by the difference method
-  (the spread of its fourth differences, robustly by the median absolute deviation, divided by
-  sqrt(C(8, 4)) = sqrt(70); von Neumann et al. 1941; Hall, Kay & Titterington 1990, Biometrika 77(3)): a
-  smooth trajectory's fourth difference is orders of magnitude below GNSS noise at any usual sample rate, so
-  no scale has to be assumed. A floor keeps the variance positive on noise-free (simulated) data. Coloured
-  noise (slow GNSS wander) is underestimated by this method: give the number then.
-- [A3] The jerks are white (the accelerations a random walk); the process noise is chosen by maximum
-  likelihood (``process: ml``, the default): the prediction-error decomposition of the filter's likelihood
-  (Schweppe 1965, IEEE Trans. Inf. Theory 11(1); Harvey 1989, *Forecasting, Structural Time Series Models and
-  the Kalman Filter*, Sec. 3.4) is maximised over two scalars, ``q_r`` and ``q_uv``, by a grid and Brent's
-  method (``scipy.optimize.minimize_scalar``), each parametrised by the smoother's bandwidth ``omega``
-  (``q = sigma^2 h omega^6``, the corner frequency of a triple integrator observed with white noise of
-  variance sigma^2 every h s): the grid spans 2 pi / duration to the Nyquist frequency, so again no vessel
-  scale is assumed. ``q_r`` maximises the likelihood of the heading (and yaw-rate) measurements, which the
-  yaw chain alone explains exactly (it does not depend on u, v or positions); ``q_uv`` then maximises the
-  full filter's likelihood. Why maximum likelihood rather than fixed numbers: the right process noise spans
-  many decades between a 3 m model turning at 0.3 rad/s and a 320 m ship at 0.01 rad/s, and a wrong one
-  either lags (biased derivatives) or passes the noise; why two scalars and not six: the likelihood
-  separates yaw from translation, while u and v share one ship's dynamics and time scale, and more free
-  scales make the optimum flat and slow. Give ``process: {q_uv: ..., q_r: ...}`` to fix them.
-- [A4] The initial state is diffuse: positions and heading from the first samples, velocities from the first
-  ten samples of positions and heading (rotated into body axes), accelerations zero, with standard
-  deviations of the order of the record's own speed and turn rate (the smoother makes the start insensitive
-  to them within a few samples).
-- [A5] ``psi`` is unwrapped (the schema requires it); a wrapped heading is still handled (innovations are
-  wrapped to +-pi), the estimate is continuous.
-
-Why written by hand (numba) and not taken from a library: no maintained Python library offers an *extended*
-RTS smoother with missing measurements and per-step time steps at this speed. filterpy (2.0) has an EKF
-class without a smoother and a linear ``rts_smoother`` that predicts with ``F x`` (wrong for an EKF, whose
-prediction is ``f(x)``), both as Python loops; statsmodels' state-space models are linear only (its
-``filter_extended`` flag is "not implemented"); pykalman offers linear and unscented smoothers, again as
-Python loops over the samples, while a likelihood search needs dozens of passes. The kernels here run one
-filter over 4,000 samples in about 8 ms and the complete estimate, process noise by maximum likelihood
-included, in about 70 ms (``benchmarks/bench_state_estimation.py``; Savitzky-Golay of measured u, v, r takes
-0.1 ms, but needs them measured).
+:func:`estimate_states` estimates ``u, v, r`` and ``u_dot, v_dot, r_dot`` from ``x0, y0, psi`` alone, or refines
+measured ``u, v, r``. Used by ``study.schema.read_record(..., states="auto"|"ekf")`` and by the ``smoothed``
+structure with ``smoothing.method: rts``. The model is the Wiener-process-acceleration model of Bar-Shalom, Li &
+Kirubarajan (2001, Sec. 6.2.3) in body axes; the smoother the extended RTS smoother (Rauch, Tung & Striebel 1965;
+Simon 2006, Sec. 9.4 and 13.2); the process noise is chosen by maximum likelihood (Harvey 1989, Sec. 3.4). The
+model, the assumptions [A1]-[A5] the code refers to, and why it is written by hand (numba) rather than taken from
+a library are in ``docs/concepts/state-estimation.md``.
 """
 from __future__ import annotations
 

@@ -1,10 +1,10 @@
-"""How the results store's one folder of JSON records scales with the number of runs (issue 13, item 4).
+"""How the results store's one folder of JSON records scales with the number of runs.
 
 Records are copies of real ones (``--source``: a results folder, e.g. one ``bench_sweep.py`` or a sweep wrote),
 each with its own run id, written into a fresh store of N records for N in ``--sizes``. Timed per N:
 
 * ``write``: one more record written by ``ResultStore.write`` (lock, atomic rename) into the folder of N;
-* ``status scan``: what the sweep's progress line did after every job before issue 13 (list the folder, read
+* ``status scan``: what the sweep's progress line did after every job before the status index (list the folder, read
   each record's first 256 bytes), and ``scan (seen)``: what it does now in a worker that has read the records
   before (``ResultStore.status_counts``: the listing, and only new or changed records read);
 * ``collect``: ``ResultStore.collect()`` (parse every record, build and write both parquet tables), the step run

@@ -1,4 +1,4 @@
-"""Benchmark of the work users wait for (issue 13): a fresh worker, the output-error emcee fit, the big sweeps.
+"""Benchmark of the work users wait for: a fresh worker, the output-error emcee fit, the big sweeps.
 
 Three parts, each printing today's figure (the baseline, measured in the same run) next to the new one and the
 ratio, so that a loaded machine slows both alike:
@@ -6,7 +6,7 @@ ratio, so that a loaded machine slows both alike:
 * ``startup`` -- **a fresh worker ready to run**: a new Python process imports what a run imports (the app, the
   pipeline, the identification, the results store) and loads the compiled code of a vessel kind (the
   integrator, the accelerations kernel the regressors and MMG self-propulsion use), with numba's cache warm.
-  Baseline: the same child in a checkout of ``--baseline-rev`` (the code before issue 13; a temporary git
+  Baseline: the same child in a checkout of ``--baseline-rev`` (the code before the speed work; a temporary git
   worktree, its cache warmed first). Target < 2 s.
 * ``emcee`` -- **the output-error emcee fit** of ``bench_identify.py``: seed 000's training record (2100 s at
   0.1 s, 1 % noise), 11 coefficients + 3 initial states (+ 3 noise scales), until 1,000 effective samples and
@@ -24,7 +24,7 @@ ratio, so that a loaded machine slows both alike:
   reuses them), divided by the 2 cores: the wall time of the sweep on an idle 2-core machine. Target for grand:
   < 600 s.
 
-* ``launcher`` -- **the launchers** (issue 13, the grouped launch): CPU per job that Hydra's joblib launcher and
+* ``launcher`` -- **the launchers** (the grouped launch): CPU per job that Hydra's joblib launcher and
   the project's ``hydra/launcher=local`` (hydra_plugins/study_launcher; with and without compositions shared
   between jobs that differ only in value overrides) spend around the job, from the slope between two sweep sizes
   of resumed jobs (fixed costs cancel), against the same jobs in one process; then grand as it was (1188 jobs)
@@ -51,7 +51,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-BASELINE_REV = "62b33f6"  # main before issue 13's speed work
+BASELINE_REV = "62b33f6"  # main before the speed work (compiled kernels, grouped launches)
 TARGETS = {"startup_s": 2.0, "emcee_oe_s": 120.0, "grand_s": 600.0}
 
 READY_CHILD = r"""

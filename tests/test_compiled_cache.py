@@ -1,5 +1,5 @@
 """The compiled code a run needs is loaded from numba's on-disk cache in a new process, never compiled again
-(issue 13: every fresh worker spent 2-5 s compiling the accelerations kernel and self-propulsion's accel).
+(without it every fresh worker spent 2-5 s compiling the accelerations kernel and self-propulsion's accel).
 
 The test makes its own cache (a fresh NUMBA_CACHE_DIR): a first process compiles and writes it, a second must
 load every function from it (numba's per-dispatcher ``stats.cache_hits``) and compile nothing."""

@@ -76,7 +76,7 @@ def test_every_effect_follows_the_contract(name, records):
 
 
 def test_the_doctors_old_name_is_the_same_catalogue():
-    """``study.doctor.effects`` (where effects lived before issue 14) still gives the same classes, for effects
+    """``study.doctor.effects`` (where effects lived before they moved to study.identify.effects) still gives the same classes, for effects
     written against it outside the package."""
     from study.doctor import effects as old
     from study.identify import effects as new

@@ -1,4 +1,4 @@
-"""Metrics that mean what they say (issue 11): each coefficient's error scaled by its term's weight in the
+"""Metrics that mean what they say: each coefficient's error scaled by its term's weight in the
 equation, per-equation drift metrics, and the prior and identifiability columns of a prior-anchored fit, all in
 the results table itself (not only in the run's record)."""
 from __future__ import annotations

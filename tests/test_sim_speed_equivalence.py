@@ -338,7 +338,7 @@ print(sum(1 for ln in asm.splitlines()
 
 @pytest.mark.slow
 def test_the_assembly_is_found_whatever_the_cache_holds(tmp_path):
-    """The quickstart's order (issue 12): a first process fills numba's on-disk cache, a second one loads the
+    """The quickstart's order: a first process fills numba's on-disk cache, a second one loads the
     integrator from it and asks for the loop's assembly; both find the same packed code. A cache of its own
     (NUMBA_CACHE_DIR), so the two states are known. About 20 s of compilation, hence slow."""
     import llvmlite.binding as llvm

@@ -1,4 +1,4 @@
-"""The speed-ups of issue 13 keep results: identical where the arithmetic is the same, within Monte Carlo error
+"""The speed-ups (compiled kernels, batched replays, grouped launches) keep results: identical where the arithmetic is the same, within Monte Carlo error
 where a faster sampler draws from the same posterior.
 
 - Output-error batches split over two threads give bit-identical simulations (the split depends on the batch

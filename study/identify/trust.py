@@ -17,6 +17,11 @@ identification engine, means changing it changes the code fingerprint of emcee's
    :data:`CORRECTED_LIMIT_SD`.
 
 The limits' reasons are in :mod:`study.identify.truncation`'s docstring.
+
+What the verdict cannot see: a term the model lacks that its other terms nearly absorb. Then the coefficients are
+biased by many posterior sd while the whitened residual stays white (measured on KVLCC2's MMG hull without N'vvr:
+17-34 sd, lag-1 autocorrelation 0.01; ``scripts/probe_missing_term.py``). "Trusted" therefore means trusted for
+the model as given: the intervals cover the identification spread, not a missing term's error.
 """
 from __future__ import annotations
 

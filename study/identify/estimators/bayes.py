@@ -1,74 +1,22 @@
-"""Posterior sampling with emcee (Foreman-Mackey et al. 2013, PASP 125, 306), affine-invariant ensemble sampler
+"""Posterior sampling with emcee (Foreman-Mackey et al. 2013, PASP 125, 306), the affine-invariant ensemble sampler
 (Goodman & Weare 2010), every step's whole ensemble evaluated in one vectorised call.
 
 Likelihoods (``likelihood``; the output-error one whenever the structure simulates):
 
-- **regression** (the default for regression structures): the rows' noise as the sample structure makes it,
-  ``Cov(e) = sum_ij Q_ij L_i L_j^T`` with ``L`` the structure's own derivative and value operators and ``Q`` the
-  mix of white noises fitted with the coefficients by maximum likelihood; the coefficients' posterior is the
-  sandwich posterior (Mueller 2013) of the whitened rows: generalised least squares with a block cluster-robust
-  covariance (``study.identify.row_noise``, which gives the reasons and sources). Gaussian, O(k^2) per walker.
-  Without the structure's operators (rows given as bare ``X, y``, the RTS smoother, r from the heading) the rows
-  are not whitened: least squares with the same block-robust covariance (the MAP estimator's model; on iid
-  rows with smooth regressors it covers 85 %). With ``correct_rows`` (the default) the rows' errors that are no
-  white noise of the target are removed first, both estimated from the run's own records
-  (``study.identify.row_errors``): the structure's truncation (its stencil's Taylor moments,
-  ``study.identify.truncation``) is subtracted from the rows, and the regressors' noise by corrected least squares
-  on the whitened rows (probed with noisy copies of the records). Measured over 60 datasets per structure, 1 %
-  noise on every channel, the rudder included (``benchmarks/bench_regression_calibration.py``; the slow test in
-  ``tests/test_regression_calibration.py``), the 90 % intervals cover the truth on the KT Mariner (first-order
-  nonlinear Nomoto, K, T, alpha; 10/10 zigzag) 93-96 % of the time at 0.1 s on euler, central, integral, smoothed
-  and diff_center without its split, 87-95 % at 1 s, 89 % on euler at 0.02 s (before the correction: euler 56 %
-  at 0.1 s, its O(h) truncation 1.55 posterior sd; central 70-78 % at 1 s over 20 datasets); on KVLCC2's MMG hull
-  (17 coefficients, 20 datasets) 89-91 %, the worst coefficient 80 %, posterior sd 1.02 times the actual spread.
-  Not covered: diff_center as Song et al. (2025) splits and cleans it (0-44 % at 0.1 s, 76-78 % at 1 s): the random hold-out
-  leaves gaps in its chains of differences, so the differencing cannot be undone, and its whitened regressors
-  are mostly noise (reliability 0.1-0.2 at 0.1 s); such a run says its intervals are not trusted.
-- **regression_iid**: y = X theta + e, e ~ N(0, sigma^2) independent per row, sigma inferred. Computed from the
-  sufficient statistics in the centred form SS(theta) = SS_min + (theta - theta_LS)^T X^T X (theta - theta_LS).
-  Right for white residuals only: on noisy records its posterior sd is 8-150 times the actual spread of the
-  least-squares estimates (central-difference noise, whose lag-2 autocorrelation -0.5 cancels in the estimate,
-  counted as independent: every interval covers), yet on KVLCC2's euler rows it covers 23 % (least squares off
-  by 127 times the truth, median: the state at k in the regressors and in the target). Kept so that the study can
-  show the difference.
-- **output error** (``output_error`` structure): each output channel c has its own noise scale sigma_c;
-  log L = sum_c [-n_c log sigma_c - SSE_c(theta) / (2 sigma_c^2)], SSE from simulating the model through the
-  records (all walkers in one batch simulation). Correct when the measurement noise is white and the model
-  structure is right.
+- **regression** (the default for regression structures): the rows' noise as the sample structure makes it
+  (``study.identify.row_noise``), the coefficients' posterior the sandwich posterior (Mueller 2013) of the
+  whitened rows; with ``correct_rows`` the structure's truncation and the regressors' noise are removed first
+  (``study.identify.row_errors``). Gaussian: sampled with an independence proposal from its closed form.
+- **regression_iid**: independent rows, sigma inferred; right for white residuals only (kept so that the studies
+  can show the difference).
+- **output error** (``output_error`` structure): a noise scale per output channel, the model simulated through
+  the records (all walkers in one batch simulation).
 
-Both regression posteriors are known in closed form: 'regression' (and any informative prior) is Gaussian, N(mean,
-cov) from ``gaussian_regression``; 'regression_iid' under a flat prior is normal-inverse-gamma (the coefficients a
-multivariate t with n - k degrees of freedom, sigma^2 given them a scaled inverse chi-square), its weak normal prior
-aside. Each is still sampled, so that the draws feed the predictive bands and the chain diagnostics like any other
-run's, but with ``moves`` 'auto' the main move (0.9 of the steps) is an independence Metropolis-Hastings proposal
-from that closed form (:class:`LaplaceProposal` with ``df=inf``: the target itself; :class:`IidRegressionProposal`),
-the other 0.1 DE moves: measured on grand's 6 cases (central rows, 32 equations) and Song et al.'s (2025) training set,
-acceptance 0.92-0.94, tau 1.04-1.30 steps (DE moves: 9-52), every chain 200 steps (500-2,750), ESS 2,460-3,090,
-the chain's median and 90 % interval the closed form's within 3.6 Monte Carlo standard errors and its sd within
-0.96-1.04 (``benchmarks/bench_emcee_regression.py``; ``tests/test_emcee_regression_proposals.py``); fit time 0.28 of
-the DE moves' on grand's problems (0.10-0.38 on Song et al.'s (2025)), the rest mostly the closed form itself. The DE moves'
-chains before had sds 0.78-1.05 of the closed form's: emcee's ``DESnookerMove`` does not leave the target
-invariant (:class:`SnookerMove`, corrected here, is used instead).
-
-Priors (stated): regression coefficients independent normal N(0, (prior_scale sd(y) / rms(X_j))^2), i.e. one
-term may explain up to ~``prior_scale`` times the spread of the target; output-error parameters uniform in the
-problem's search box; noise scales uniform in log sigma (Jeffreys) on [1e-8, 10] x the target's (channel's)
-spread. Walkers start at draws of the closed-form posterior (regression) or of the Laplace approximation at the
-Gauss-Newton optimum (output error; a small ball where it is singular).
-
-Run length: chunks of ``check_every`` steps until the effective sample size (walkers x kept steps / the largest
-integrated autocorrelation time, emcee's estimator) reaches ``target_ess`` and the chain is longer than
-``min_tau_multiple`` x tau (50 by default, emcee's guidance), or ``max_steps``, and never fewer than ``min_steps``.
-The first half of the chain is discarded as burn-in. Defaults (``min_steps``, ``check_every`` None): 500 and 250
-steps; 200 and 50 for the closed-form proposal, whose tau is about 1.2: by 200 steps the ESS is about 2,700 and 50
-tau is 60 steps, so such a chain stops at the floor for any ``target_ess`` up to about 2,500. The floor is there because emcee's estimate of tau is biased low on short
-chains (each walker's autocorrelation is taken about its own mean): measured on correlated Gaussians with this
-proposal, 25-35 % low at 20 kept steps, 10 % at 100 (200 steps), so a chain stopped at 60 steps overstates its ESS
-by 14-22 %, one of 200 steps by at most 5 % (over 100 chains, the variance of the chain mean times the reported
-ESS: 0.95-1.04 at 200 steps, 1.14-1.22 at about 60). 200 steps x 32 walkers cost 0.03-0.1 s, less than the
-closed form itself.
-Recorded: acceptance fraction, tau, ESS, steps, whether the stopping rule was met; the thinned chain is saved
-(``chain.npz``); the parameter table gets the posterior median, sd and the central ``interval`` credible interval.
+Priors: regression coefficients independent normal N(0, (prior_scale sd(y) / rms(X_j))^2); output-error parameters
+uniform in the search box; noise scales Jeffreys on [1e-8, 10] x the target's spread. Run length: chunks of
+``check_every`` steps until the ESS reaches ``target_ess`` and the chain exceeds ``min_tau_multiple`` x tau, with a
+floor of ``min_steps`` (emcee's tau is biased low on short chains). The derivations, the measured calibration and
+the reasons for each default are in ``docs/concepts/emcee.md``.
 """
 from __future__ import annotations
 
@@ -106,20 +54,11 @@ class EmceeSampler(Estimator):
     min_tau_multiple : float
         The chain must be longer than this many autocorrelation times (emcee's guidance: 50).
     moves : str
-        'de': emcee's differential-evolution moves (DEMove 0.8, the snooker move 0.2, :class:`SnookerMove`: emcee's
-        ``DESnookerMove`` corrected; ter Braak & Vrugt 2008, as
-        emcee's documentation suggests for correlated posteriors): measured 2.5x shorter autocorrelation times
-        than the stretch move on a 14-dimensional correlated Gaussian. 'stretch': Goodman & Weare (emcee's
-        default). 'laplace', regression: an independence Metropolis-Hastings proposal from the posterior in closed
-        form 0.9 of the steps, the DE moves 0.1 of them (see the module docstring). 'laplace', output error: an
-        independence proposal (``LaplaceProposal``: a multivariate t, 5 degrees of freedom, cut by the prior box)
-        0.8 of the steps, the DE moves 0.2 of them. It starts at the Laplace approximation at the posterior mode and
-        is refitted to the
-        walkers' draws after ``check_every`` and 2 ``check_every`` steps, then frozen (the steps before are
-        burn-in): the Laplace approximation alone is a poor proposal for a long replay (far from linear in the
-        coefficients, cut by the box). Measured on ``benchmarks/bench_sweep.py``'s 17 dimensions: acceptance
-        0.20, autocorrelation 16 steps against 112-120 with 'de', 1,000 steps against 7,250. 'auto': 'laplace'
-        (for regression likelihoods and output error alike; 'de' where no Gaussian approximation exists).
+        'de': emcee's differential-evolution moves (DEMove 0.8, :class:`SnookerMove` 0.2: emcee's
+        ``DESnookerMove`` corrected; ter Braak & Vrugt 2008). 'stretch': Goodman & Weare (emcee's default).
+        'laplace': an independence proposal from the closed-form posterior (regression) or a refitted multivariate
+        t (``LaplaceProposal``, output error) most of the steps, the DE moves the rest. 'auto': 'laplace' where a
+        Gaussian approximation exists, else 'de'. Shares and measurements: ``docs/concepts/emcee.md``.
     likelihood : str
         Regression structures: 'regression' (the rows' noise modelled with the structure's operators; default) or
         'regression_iid' (independent rows); see the module docstring. Output error ignores it.

@@ -377,7 +377,7 @@ class Doctor:
                          f"of the per-record errors, which needs at least {MIN_RECORDS_FOR_TEST}) was not run, so a "
                          f"verdict rests on the mean error alone; give at least {MIN_RECORDS_FOR_TEST} validation "
                          f"records (or {MIN_RECORDS_FOR_TEST} training records, each held out in turn) to settle it")
-        first_ranking, missing, ambiguous, stab = None, None, [], []
+        first_ranking, missing, ambiguous, stab, first_evs = None, None, [], [], {}
         diverged = {"baseline": base.diverged}
         current = base  # the ladder's step as reported (outer parameters refined on the replay error)
         ranking_base = base if not self.given else self.evaluate(tuple(self.given))  # its equation-error twin
@@ -395,7 +395,7 @@ class Doctor:
             ranking, evs = self.rank(ranking_base, scored)
             m, amb, _ = decide(ranking_base, evs, self.opt, scored)
             if first_ranking is None:
-                first_ranking = ranking
+                first_ranking, first_evs = ranking, evs
             if not scored:
                 break
             st = self.stability(ranking_base, evs, m, amb, scored)
@@ -446,11 +446,34 @@ class Doctor:
                          "missing effect")
         if notes and any("too little excitation" in n for n in notes) and missing:
             notes.append(f"{missing} ranks first, but with little excitation the ranking is weak evidence")
+        separating = self.separating(first_ranking or [], first_evs, missing, ambiguous, stab)
+        if separating is not None:
+            notes.append(separating["text"])
         self.result = {"base": base, "final": current, "ranking": first_ranking or [], "missing": missing,
                        "ambiguous": ambiguous, "ladder": ladder, "notes": notes, "stability": stab,
+                       "separating": separating,
+                       "pair_evaluations": {e: first_evs[e] for e in (separating or {}).get("pair", [])},
                        "diverged": diverged, "scored": scored, "ladder_fits": ladder_fits,
                        "seconds": time.perf_counter() - t0}
         return self.result
+
+    def separating(self, ranking: list, evs: dict, missing, ambiguous, stab: list) -> dict | None:
+        """For a weak verdict, the manoeuvre that would best tell the two leading candidates apart
+        (:mod:`study.doctor.separating`): the tie when the data cannot tell two apart, or the named effect and the
+        runner-up when the name does not survive leaving each validation record out. None otherwise."""
+        from .separating import separating_maneuvers
+
+        if ambiguous:
+            pair = list(ambiguous)
+        elif missing and stab and stab[0].get("k") is not None and stab[0]["k"] < stab[0]["n"]:
+            pair = [missing] + [r["effect"] for r in ranking if r["effect"] != missing][:1]
+        else:
+            return None
+        if len(pair) < 2 or any(e not in evs for e in pair):
+            return None
+        return separating_maneuvers(self.problem, {e: evs[e].fit for e in pair},
+                                    list(self.train_df) + list(self.val_df),
+                                    list(self.train_names) + list(self.val_names))
 
     # ------------------------------------------------------------------------------------------ report
     def report(self) -> dict:
@@ -526,6 +549,7 @@ class Doctor:
             "ambiguous": r["ambiguous"],
             "ladder": r["ladder"],
             "stability": r["stability"],
+            "separating_maneuver": r.get("separating"),
             "scored_records": r["scored"],
             "diverged": r["diverged"],
             "final": {"effects": list(final.effects), "validation_error": final.validation_error,

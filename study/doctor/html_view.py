@@ -384,6 +384,22 @@ def catalogue(r: dict) -> dict | None:
     return _section("catalogue", rows=rows, has_applies=has_applies, unit_notes=unit_notes(notes))
 
 
+def separating(r: dict) -> dict | None:
+    """The manoeuvres that would best tell the two leading candidates apart, best first (the top eight), and the
+    records in hand scored the same way."""
+    sep = r.get("separating_maneuver") or {}
+    menu = [m for m in sep.get("menu") or [] if isinstance(m, Mapping)]
+    if not menu:
+        return None
+    row = lambda m, what: {"what": what, "D": num(finite(m.get("D")), 3), "channel": as_text(m.get("channel")),  # noqa: E731
+                           "max_sd": num(finite(m.get("max_sd")), 2), "diverged": as_text(m.get("diverged"))}
+    rows = [row(m, f"{as_text(m.get('maneuver'))} to {as_text(m.get('side'))}, "
+                   f"{100 * (finite(m.get('speed_U0')) or 0):.0f} % of the service speed") for m in menu[:8]]
+    recorded = [row(m, as_text(m.get("record"))) for m in sep.get("recorded") or [] if isinstance(m, Mapping)]
+    return _section("separating", pair=names(sep.get("pair") or []), text=as_text(sep.get("text")), rows=rows,
+                    recorded=recorded, sigma=[f"{c}: {num(finite(v), 3)}" for c, v in (sep.get("sigma") or {}).items()])
+
+
 def notes(r: dict) -> dict | None:
     return _section("notes", entries=r["notes"]) if r.get("notes") else None
 
@@ -455,7 +471,7 @@ def view(report: Any, figure_bytes: Mapping | None = None) -> dict:
     r = normalise(report)
     figs = {str(k): v for k, v in figure_bytes.items()} if isinstance(figure_bytes, Mapping) else {}
     sections = [s for s in (ladder(r), ranking(r), errors(r), maneuvers(r), uncertainty(r), identifiability(r),
-                            figures(r, figs), worst(r), catalogue(r), notes(r), data(r), definitions(r),
+                            figures(r, figs), separating(r), worst(r), catalogue(r), notes(r), data(r), definitions(r),
                             provenance(r)) if s is not None]
     return {"title": r.get("title") or "Model doctor report", "created_by": r.get("created_by") or "",
             "summary": summary(r), "verdict": verdict(r), "divergence": divergence(r),

@@ -22,6 +22,8 @@ import numpy as np
 WIDTH = 9.5  # in; at DPI this is about 1050 px, shown at the page's ~900 px
 DPI = 110
 C_MEAS, C_BASE, C_FINAL, C_WARN = "0.15", "C3", "C0", "#b00020"
+#: the two candidates of a weak verdict, drawn beside the baseline (Okabe & Ito's colour-blind-safe orange and green)
+C_PAIR = ("#E69F00", "#009E73")
 
 STYLE = {"font.size": 10, "axes.titlesize": 10.5, "axes.labelsize": 10, "xtick.labelsize": 9,
          "ytick.labelsize": 9, "legend.fontsize": 9, "figure.titlesize": 11.5, "axes.titlelocation": "left",
@@ -71,11 +73,12 @@ def _warn_box(ax, text: str, y: float = 0.5) -> None:
             zorder=10)
 
 
-def compare(name: str, meas, base, final, base_label: str, final_label: str) -> bytes:
+def compare(name: str, meas, base, final, base_label: str, final_label: str, pair=()) -> bytes:
     """Measured u, v, r, psi against time and the track, with the baseline's and the final model's replays.
 
     ``base`` / ``final`` None: not drawn -- a replay that diverged when its label is given (said in the legend
-    and on the panels), no such model when the label is empty (``final`` when no effect was added)."""
+    and on the panels), no such model when the label is empty (``final`` when no effect was added). ``pair``:
+    up to two more (replay, label), the candidates a weak verdict could not tell apart."""
     plt = _plt()
     from matplotlib.lines import Line2D
 
@@ -85,7 +88,8 @@ def compare(name: str, meas, base, final, base_label: str, final_label: str) -> 
     axes += [fig.add_subplot(gs[k, 0], sharex=axes[0]) for k in (1, 2, 3)]
     track = fig.add_subplot(gs[:, 1])
     t = _col(meas, "time")
-    models = [(base, base_label or "baseline", C_BASE), (final, final_label, C_FINAL)]
+    models = [(base, base_label or "baseline", C_BASE), (final, final_label, C_FINAL)] + \
+        [(pred, lab, col) for (pred, lab), col in zip(pair, C_PAIR)]
     diverged = [lab for pred, lab, _ in models if pred is None and lab]
     for ax, c in zip(axes, ("u", "v", "r", "psi")):
         f, unit = SCALE[c]

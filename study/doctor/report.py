@@ -148,16 +148,21 @@ def write_report(doctor, out_dir, vessel: str, model: str, overwrite: bool = Fal
         listing.append({"file": name, "title": title, "caption": caption, "section": section})
 
     fl = "+".join(final.effects) if final.effects != base.effects else None
+    # a weak verdict: the two candidates it could not tell apart, replayed beside the baseline
+    pair = {e: predictions(doctor, ev) for e, ev in (r.get("pair_evaluations") or {}).items()
+            if doctor.mode == "given" or ev.fold_fits}  # held out in turn: only where each fold was fitted
+    pair_text = (f" The two candidates the records cannot tell apart (or that the verdict rests on weakly), "
+                 f"{' and '.join(pair)}, in orange and green." if pair else "")
     for name, df in meas.items():
         add(f"compare_{_slug(name)}.png",
             plots.compare(name, df, pb.get(name), pf.get(name) if fl else None,
                           "baseline" + (f" ({'+'.join(base.effects)})" if base.effects else ""),
-                          f"with {fl}" if fl else ""),
+                          f"with {fl}" if fl else "", [(p.get(name), f"+ {e}") for e, p in pair.items()]),
             f"{name}: measured against predicted",
             ("Measured (dots), the baseline model (red) and the model with the effects found (blue), replayed open "
              "loop with the record's rudder and propeller." if fl else
              "Measured (dots) and the baseline model (red), replayed open loop with the record's rudder and "
-             "propeller (no effect was added).") +
+             "propeller (no effect was added).") + pair_text +
             (f" The baseline replay DIVERGED on this record and is not drawn." if name in base.diverged else ""),
             "compare")
     res = residuals(doctor.problem, base.fit, doctor.train_names)

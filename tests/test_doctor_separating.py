@@ -1,0 +1,92 @@
+"""The manoeuvre that would tell two candidate explanations apart (study/doctor/separating.py): the score's
+arithmetic, the noise it is measured against, and the doctor's report of it for a tie."""
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from study.doctor.diagnose import Doctor, Options
+from study.doctor.html import render_html
+from study.doctor.separating import DECISIVE, MENU, SPEEDS_U0, channel_noise, divergence
+
+from test_doctor import KNOWN, VESSEL, records, scaled
+
+
+def _frame(t, **cols):
+    return pd.DataFrame({"time": t, **cols})
+
+
+def test_the_score_is_half_the_sum_of_squared_differences_in_noise_sd():
+    t = np.arange(0.0, 10.0, 0.1)
+    a = _frame(t, u=np.ones_like(t), v=np.zeros_like(t), r=np.zeros_like(t))
+    b = _frame(t, u=np.ones_like(t) + 0.02, v=np.zeros_like(t), r=np.zeros_like(t))
+    sigma = {"u": 0.01, "v": 0.001, "r": 0.001}
+    d = divergence(a, b, sigma, dt_record=0.1)
+    assert d["D"] == pytest.approx(0.5 * len(t) * 2.0 ** 2) and d["channel"] == "u"
+    assert d["max_sd"] == pytest.approx(2.0)
+    # at half the sampling rate a record holds half the samples: half the evidence
+    assert divergence(a, b, sigma, dt_record=0.2)["D"] == pytest.approx(d["D"] / 2)
+    assert divergence(a, a, sigma, 0.1)["D"] == 0.0
+    assert divergence(b, a, sigma, 0.1)["D"] == pytest.approx(d["D"])
+
+
+def test_the_noise_is_the_records_own_white_noise():
+    rng = np.random.default_rng(3)
+    t = np.arange(0.0, 300.0, 0.1)
+    smooth = 1.0 + 0.2 * np.sin(0.05 * t)
+    recs = [_frame(t, u=smooth + 0.01 * rng.standard_normal(len(t)), v=0.1 * np.sin(0.03 * t),
+                   r=0.01 * np.cos(0.02 * t) + 0.001 * rng.standard_normal(len(t))) for _ in range(3)]
+    s = channel_noise(recs)
+    assert s["u"] == pytest.approx(0.01, rel=0.1) and s["r"] == pytest.approx(0.001, rel=0.1)
+    assert s.get("v", 0.0) < 1e-4  # noise-free: no noise to measure (at most rounding)
+
+
+@pytest.fixture(scope="module")
+def tied():
+    """Records with a hidden current, the candidates' validation errors forced within the tie (as in
+    test_doctor's decision-rule test), each candidate still fitted for real."""
+    train, val = records([{"name": "current", "speed_U0": 0.1, "direction_deg": 45.0}], duration=60.0)
+    d = Doctor(VESSEL, KNOWN, train, val, Options(candidates=("current", "wind", "yaw_bias")))
+    real, scale = Doctor.evaluate, {"current": 0.40, "wind": 0.42, "yaw_bias": 0.95}
+    base = real(d, ())
+
+    def tie(self, effects, start=None, fixed=(), refine=False):
+        ev = real(self, effects, start, fixed, refine)
+        return scaled(ev, effects, scale[effects[-1]] * base.validation_error / ev.validation_error) if effects \
+            else ev
+
+    mp = pytest.MonkeyPatch()
+    mp.setattr(Doctor, "evaluate", tie)
+    try:
+        d.run()
+    finally:
+        mp.undo()
+    return d, d.report()
+
+
+def test_a_tie_recommends_the_manoeuvre_where_the_two_fits_differ_most(tied):
+    d, rep = tied
+    assert rep["ambiguous"] == ["current", "wind"]
+    sep = rep["separating_maneuver"]
+    assert sep["pair"] == ["current", "wind"]
+    assert len(sep["menu"]) == len(MENU) * 2 * len(SPEEDS_U0)
+    D = [m["D"] for m in sep["menu"] if np.isfinite(m["D"])]
+    assert D == sorted(D, reverse=True) and sep["best"] == sep["menu"][0]
+    assert len(sep["recorded"]) == len(d.train_df) + len(d.val_df)
+    # a current and a wind of these sizes predict different turns: some manoeuvre separates them decisively
+    assert sep["best"]["D"] > DECISIVE
+    best = sep["best"]
+    assert f"to {best['side']}" in sep["text"] and sep["text"] in rep["notes"]
+    html = render_html(rep)
+    assert 'id="separating"' in html and 'href="#separating"' in html
+
+
+def test_a_settled_verdict_recommends_nothing():
+    train, val = records([{"name": "current", "speed_U0": 0.1, "direction_deg": 45.0}], duration=60.0)
+    d = Doctor(VESSEL, KNOWN, train, val, Options(candidates=("current", "yaw_bias")))
+    d.run()
+    rep = d.report()
+    assert rep["missing_effect"] == "current"
+    st = rep["stability"][0]
+    assert (rep["separating_maneuver"] is None) == (st["k"] is None or st["k"] == st["n"])

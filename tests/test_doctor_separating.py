@@ -90,3 +90,19 @@ def test_a_settled_verdict_recommends_nothing():
     assert rep["missing_effect"] == "current"
     st = rep["stability"][0]
     assert (rep["separating_maneuver"] is None) == (st["k"] is None or st["k"] == st["n"])
+
+
+def test_records_with_and_without_a_depth_are_warned_of():
+    """Trained deep (no depth) and at h/T 2.0, validated at 1.5 without its depth: the records without one share
+    one h/T, which the report says, naming them."""
+    from doctor_cases import make_records
+
+    from study.schema import Record
+
+    train, val, _ = make_records({"depth_h_T": {"train": [None, 2.0, None], "validate": [1.5, 1.5]}}, duration=60.0)
+    val = [Record(data=r.data.drop(columns=["depth"]), meta=r.meta) for r in val]
+    d = Doctor(VESSEL, KNOWN, train, val, Options(candidates=("shallow_water", "yaw_bias")))
+    notes = d.depth_notes()
+    assert len(notes) == 1 and "water depth given for 1 record(s)" in notes[0]
+    assert "validate_0_zigzag_20_10_port" in notes[0] and "train_0_zigzag_10_10" in notes[0]
+    assert not Doctor(VESSEL, KNOWN, train, val, Options(candidates=("yaw_bias",))).depth_notes()

@@ -457,6 +457,19 @@ class Doctor:
                        "seconds": time.perf_counter() - t0}
         return self.result
 
+    def depth_notes(self) -> list:
+        """A warning when some records give their water depth and others do not: those without share one fitted
+        h/T (or are deep), so a record run at a depth of its own is mispredicted (measured on simulated records
+        trained deep and at h/T 2.0, validated at 1.5 without a depth: the shallow-water candidate is not named)."""
+        infos = list(self.problem.infos) + list(self.val_infos)
+        given = [i.name for i in infos if i.h_T is not None]
+        missing = [i.name for i in infos if i.h_T is None]
+        if not given or not missing or "shallow_water" not in self.effects:
+            return []
+        return [f"water depth given for {len(given)} record(s) but not for {', '.join(missing)}: those share one "
+                "h/T (fitted by shallow_water, else deep water), so a record run at a depth of its own is "
+                "mispredicted; give each record's depth (a depth column, or depth in its metadata)"]
+
     def separating(self, ranking: list, evs: dict, missing, ambiguous, stab: list) -> dict | None:
         """For a weak verdict, the manoeuvre that would best tell the two leading candidates apart
         (:mod:`study.doctor.separating`): the tie when the data cannot tell two apart, or the named effect and the
@@ -534,7 +547,7 @@ class Doctor:
                 verdict += f" (the same in {stab[1]['k']} of {stab[1]['n']} with one validation record left out)"
         params_units = self.problem.units(tuple(self.effects))
         setup = self.setup_report(final)
-        notes = list(r["notes"]) + setup["notes"]
+        notes = list(r["notes"]) + setup["notes"] + self.depth_notes()
         implausible = [c for c in r["ranking"] if c.get("implausible")]
         for c in implausible:
             notes.append(f"candidate {c['effect']} rejected as physically implausible here: {c['implausible']}")

@@ -102,6 +102,26 @@ def test_coverage_counts_match_claims(study):
         assert any(text in r for r in rows), text
 
 
+def test_a_missing_terms_trusted_coverage_of_the_models_own_fit_matches_claims():
+    """The runs without N'vvr (white noise, the finest interval), trusted: the share of their intervals that hold
+    the estimate of the noise-free run of the same model, structure, interval and dataset (replicate)."""
+    runs, params = _table("emcee_calibration")
+    runs = runs[(runs["status"] == "ok") & runs["cfg_model.omit"].astype(str).str.contains("Nvvr")]
+    fine = runs[np.isclose(runs["m_sample_dt_LU"], runs.groupby("cfg_model.name")["m_sample_dt_LU"].transform("min"))]
+    keys = ["cfg_model.name", "cfg_structure.name", "replicate"]
+    p = params[params["truth_kind"].isin(["exact", "approximate"])][["run_id", "name", "ci_low", "ci_high"]
+                                                                      + ["estimate"]]
+    p = p.merge(fine[["run_id", "cfg_noise.name", "m_intervals_trusted"] + keys], on="run_id")
+    clean = p[p["cfg_noise.name"] == "none"][keys + ["name", "estimate"]].rename(columns={"estimate": "own"})
+    noisy = p[(p["cfg_noise.name"] == "low_relative") & (p["m_intervals_trusted"] == True)]  # noqa: E712
+    both = noisy.merge(clean, on=keys + ["name"])
+    rows = _claim_rows("emcee_calibration")
+    for m, g in both.groupby("cfg_model.name"):
+        cov = ((g["ci_low"] <= g["own"]) & (g["own"] <= g["ci_high"])).mean()
+        assert any(f"{m}/central, model without Nvvr: the model's own best fit {100 * cov:.0f} %" in r
+                   for r in rows), (m, cov)
+
+
 def _stale(study_dir: Path) -> int:
     from study.figures import code_status
 

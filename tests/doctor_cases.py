@@ -8,6 +8,8 @@ An ``example`` may give
 - ``rudder_log: command``: the records' rudder column holds the command (an autopilot log);
 - ``depth_h_T: {train: [...], validate: [...]}``: each record at its own h/T, with a ``depth`` column;
 - ``model_omits: terms``: the model lacks the effect's terms (hull_nonlinear's per-kind list);
+- ``record_thrust: true``: the records carry the propeller thrust [N] (the simulator's own, ``study.sim.mmg.thrust``,
+  at the true states, with the same relative noise as the other channels);
 - ``expect``: parameter -> ``{value | value_U0 | truth: true, rel | abs | abs_deg, models}``.
 """
 from __future__ import annotations
@@ -15,7 +17,7 @@ from __future__ import annotations
 import copy
 import math
 
-from study.measure import MeasurementModel
+from study.measure import DEFAULT_CHANNELS, MeasurementModel
 from study.pipeline import resolve_effects
 from study.schema import Record
 from study.config import read_config
@@ -59,6 +61,18 @@ def perturbed_prior(cfg: dict, model: dict, rel: float = 0.2) -> dict:
     return out
 
 
+def true_thrust(vessel, df):
+    """The simulator's propeller thrust [N] (``study.sim.mmg.thrust``, eqs. 13-16 of Yasukawa & Yoshimura 2015)
+    at a simulation's states."""
+    import numpy as np
+
+    from study.sim import mmg
+
+    P = np.ascontiguousarray(vessel.params, dtype=np.float64).reshape(-1, 1)
+    return np.array([mmg.thrust(u, v, r, n, P, 0)[0] for u, v, r, n in
+                     df[["u", "v", "r", "n"]].to_numpy(float)])
+
+
 def make_records(example: dict, seed: int = 0, duration: float = 300.0, vessel_cfg: dict = VESSEL):
     """(training Records, validation Records, truth vessel config) of a hidden-effect example."""
     cfg = changed_vessel(vessel_cfg, example.get("vessel"))
@@ -72,7 +86,11 @@ def make_records(example: dict, seed: int = 0, duration: float = 300.0, vessel_c
             clean = simulate(load_vessel(cfg, effects), m, duration=duration)
             if example.get("rudder_log") == "command":
                 clean["delta"] = clean["delta_cmd"]
-            df = MeasurementModel(dt=0.1, noise_level=0.01, seed=seed + len(out)).apply(clean.drop(columns="delta_cmd"))
+            if example.get("record_thrust"):
+                clean["thrust"] = true_thrust(load_vessel(cfg, effects), clean)
+            chans = DEFAULT_CHANNELS + (("thrust",) if "thrust" in clean.columns else ())
+            df = MeasurementModel(dt=0.1, noise_level=0.01, seed=seed + len(out),
+                                  channels=chans).apply(clean.drop(columns="delta_cmd"))
             if h:
                 df["depth"] = float(h) * float(cfg["particulars"]["d"])
             out.append((role, Record(data=df, meta={"name": f"{role}_{i}_{m}"})))

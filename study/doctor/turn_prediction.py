@@ -55,6 +55,9 @@ CASES = (
     ("+ yaw bias, kept in the turn (keep_setup_effects)", 0.3, ("yaw_bias",)),
     ("+ yaw bias + rudder interaction (t_R, a_H, x_R free)", 0.3, ("yaw_bias", "rudder_interaction")),
     ("+ propeller wake (w_P0, t_P free)", 0.3, ("propeller_wake",)),
+    ("+ rudder inflow (gamma_R to either side, l_R, epsilon free)", 0.3, ("rudder_inflow",)),
+    ("+ yaw bias + rudder inflow", 0.3, ("yaw_bias", "rudder_inflow")),
+    ("+ propeller from the measured thrust (w_P0 from thrust, t_P free)", 0.3, ("propeller_thrust",)),
     ("hull identified, unanchored least squares", 0.0, ()),
 )
 

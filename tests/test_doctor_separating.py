@@ -80,6 +80,10 @@ def test_a_tie_recommends_the_manoeuvre_where_the_two_fits_differ_most(tied):
     assert f"to {best['side']}" in sep["text"] and sep["text"] in rep["notes"]
     html = render_html(rep)
     assert 'id="separating"' in html and 'href="#separating"' in html
+    # the residual yaw moment per rudder-angle bin: its bins hold every training row, and the page shows it
+    rr = rep["rudder_residual"]["baseline"]
+    assert sum(b["rows"] for b in rr["bins"]) <= rr["rows"] and rr["N_rms"] > 0
+    assert 'id="rudder_residual"' in html
 
 
 def test_a_settled_verdict_recommends_nothing():

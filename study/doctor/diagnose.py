@@ -457,6 +457,17 @@ class Doctor:
                        "seconds": time.perf_counter() - t0}
         return self.result
 
+    def rudder_residual(self, base, final) -> dict:
+        """The residual yaw moment and sway force per rudder-angle bin of the baseline's and the final model's fit
+        (:func:`study.doctor.rudder_residual.residual_by_rudder`): a ramp says the rudder force is off, a kink at
+        zero that it differs to port and to starboard."""
+        from .rudder_residual import residual_by_rudder
+
+        out = {"baseline": residual_by_rudder(self.problem, base.fit)}
+        if final.effects != base.effects:
+            out["final"] = residual_by_rudder(self.problem, final.fit)
+        return out
+
     def depth_notes(self) -> list:
         """A warning when some records give their water depth and others do not: those without share one fitted
         h/T (or are deep), so a record run at a depth of its own is mispredicted (measured on simulated records
@@ -563,6 +574,7 @@ class Doctor:
             "ladder": r["ladder"],
             "stability": r["stability"],
             "separating_maneuver": r.get("separating"),
+            "rudder_residual": self.rudder_residual(base, final),
             "scored_records": r["scored"],
             "diverged": r["diverged"],
             "final": {"effects": list(final.effects), "validation_error": final.validation_error,

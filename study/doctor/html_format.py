@@ -26,7 +26,8 @@ MODES = {"given": "validation records given by the user", "held_out": "validatio
 TITLES = {"ladder": "Error ladder", "candidates": "Candidate effects", "errors": "Errors per record and channel",
           "maneuvers": "Manoeuvres in the ship's terms", "uncertainty": "How far the predictions can be trusted",
           "identifiability": "Which coefficients the records determine", "figures": "Figures",
-          "separating": "The manoeuvre that would tell them apart", "worst": "Worst windows of the baseline", "catalogue": "Catalogue of candidate effects", "notes": "Notes",
+          "separating": "The manoeuvre that would tell them apart",
+          "rudder_residual": "Residual yaw moment against the rudder angle", "worst": "Worst windows of the baseline", "catalogue": "Catalogue of candidate effects", "notes": "Notes",
           "data": "Data and model", "definitions": "Definitions", "provenance": "Provenance"}
 STABILITY_DEF = ("how many of the n refits, each with one validation record left out, name the same effect at "
                  "this step")
@@ -36,7 +37,7 @@ REJECTED_DEF = ("a step whose validation error is not below the previous step's 
 _LISTS = ("ranking", "ladder", "errors_table", "worst_windows", "catalogue", "figures", "stability", "identifiability",
           "maneuver_metrics", "notes", "train", "validate", "ambiguous")
 _DICTS = ("baseline", "final", "diverged", "units", "definitions", "not_applicable", "depths_h_T", "provenance",
-          "prediction_uncertainty", "separating_maneuver")
+          "prediction_uncertainty", "separating_maneuver", "rudder_residual")
 #: list keys whose entries are rows (mappings); the others hold names or sentences
 _ROWS = ("ranking", "ladder", "errors_table", "worst_windows", "catalogue", "figures", "stability", "identifiability",
          "maneuver_metrics")

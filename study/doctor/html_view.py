@@ -400,6 +400,23 @@ def separating(r: dict) -> dict | None:
                     recorded=recorded, sigma=[f"{c}: {num(finite(v), 3)}" for c, v in (sep.get("sigma") or {}).items()])
 
 
+def rudder_residual(r: dict) -> dict | None:
+    """Mean residual N' and Y' (x 1e4) of the training rows per rudder-angle bin, baseline and final model."""
+    rr = r.get("rudder_residual") or {}
+    fits = [(label, rr[k]) for k, label in (("baseline", "baseline"), ("final", "final model"))
+            if isinstance(rr.get(k), Mapping) and rr[k].get("bins")]
+    if not fits:
+        return None
+    scaled = lambda x: num(None if finite(x) is None else 1e4 * finite(x), 3)  # noqa: E731
+    bins = fits[0][1]["bins"]
+    rows = [{"bin": f"{num(b.get('delta_from_deg'), 3)} to {num(b.get('delta_to_deg'), 3)}",
+             "cells": [c for _, f in fits for c in (scaled(f["bins"][i].get("N_mean")),
+                                                    scaled(f["bins"][i].get("Y_mean")))],
+             "rows": as_text(b.get("rows"))} for i, b in enumerate(bins)]
+    return _section("rudder_residual", models=[label for label, _ in fits], rows=rows,
+                    spread=[scaled(f.get("N_spread")) for _, f in fits], rms=[scaled(f.get("N_rms")) for _, f in fits])
+
+
 def notes(r: dict) -> dict | None:
     return _section("notes", entries=r["notes"]) if r.get("notes") else None
 
@@ -471,7 +488,7 @@ def view(report: Any, figure_bytes: Mapping | None = None) -> dict:
     r = normalise(report)
     figs = {str(k): v for k, v in figure_bytes.items()} if isinstance(figure_bytes, Mapping) else {}
     sections = [s for s in (ladder(r), ranking(r), errors(r), maneuvers(r), uncertainty(r), identifiability(r),
-                            figures(r, figs), separating(r), worst(r), catalogue(r), notes(r), data(r), definitions(r),
+                            figures(r, figs), separating(r), rudder_residual(r), worst(r), catalogue(r), notes(r), data(r), definitions(r),
                             provenance(r)) if s is not None]
     return {"title": r.get("title") or "Model doctor report", "created_by": r.get("created_by") or "",
             "summary": summary(r), "verdict": verdict(r), "divergence": divergence(r),

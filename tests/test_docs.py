@@ -18,7 +18,7 @@ CONFIG_PAGE = ROOT / "docs" / "reference" / "config.md"
 STUDIES_PAGE = ROOT / "docs" / "studies" / "index.md"
 
 #: the quickstart commands, exactly: .ci/run runs the second
-QUICKSTART = ("pip install -e '.[test]' && python -m study", "pip install -e '.[test]' && python -m pytest")
+QUICKSTART = ("pip install -e '.[test]' && python -m study", "pip install -e '.[test]' && python -m pytest -n auto --dist loadfile")
 
 
 def test_the_readme_is_a_landing_page():

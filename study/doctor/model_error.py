@@ -41,8 +41,9 @@ START_SPEED_U0 = 0.5
 #: :func:`growth_for`)
 MIN_REACH = 0.5
 #: posterior draws of a split's fit replayed through each record it predicts: the held-out prediction's own
-#: identification spread, which :func:`growth_for` takes out of its error (a setting: 16 draws give the 5-95 %
-#: range of the log metric to about +-30 %, enough for a component that is subtracted in quadrature)
+#: identification spread, which :func:`growth_for` takes out of its error (a setting. Measured on lognormal draws,
+#: 4000 repetitions: from 16 draws ``prediction_interval.draws_log_sd`` is 0.85 of the true sd on average, with a
+#: spread of 0.17 -- low, the conservative side for a component that is subtracted)
 CAL_DRAWS = 16
 
 

@@ -50,7 +50,9 @@ def test_every_predicted_metric_has_an_interval_around_it_with_its_parts(report)
             assert r[f"{col}_low"] < r[col] < r[f"{col}_high"], (r["record"], r["metric"], col)
             u = r[f"{col}_uncertainty"]
             assert {"s_id", "s_struct", "s_extrap", "distance", "half_width", "growth_source"} <= set(u)
-            assert u["s_id"] > 0 and u["s_extrap"] > 0 and u["draws"] >= 16
+            # s_extrap may be 0 here: the model's form is the truth's, so the held-out errors can all lie within
+            # the held-out fits' own identification spread, which is taken out of them
+            assert u["s_id"] > 0 and u["s_extrap"] >= 0 and u["draws"] >= 16
     turn = {r["metric"]: r for r in rows if r["record"].endswith("turning_35")}
     # the turn is replayed far outside the zigzags' envelope and its intervals say which coefficients carry it
     assert turn["tactical_diameter_L"]["final_uncertainty"]["distance"] > 0.3
@@ -58,6 +60,9 @@ def test_every_predicted_metric_has_an_interval_around_it_with_its_parts(report)
     sec = rep["prediction_uncertainty"]
     assert sec["final"]["records"]["validate_1_turning_35"]["text"].startswith("EXTRAPOLATES")
     assert sec["final"]["alternatives"] and sec["final"]["calibration"]["splits"]
+    cal = sec["final"]["calibration"]
+    assert cal["growth"]["net_of_own"] >= 2  # the held-out predictions' own spreads were measured and taken out
+    assert any(p["own_sd"].get("rms_yaw_rate", 0) > 0 for p in cal["pairs"])
 
 
 def test_the_report_predicts_both_turns_and_says_they_extrapolate(report):

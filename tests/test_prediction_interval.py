@@ -25,15 +25,33 @@ def frame(v, r, U=1.0, delta=0.0, L=1.0) -> pd.DataFrame:
 
 
 # ------------------------------------------------------------------------------------------- combination
-def test_components_add_in_quadrature_on_the_log_scale():
+def test_identification_and_form_add_in_quadrature_and_the_form_is_counted_once():
     got = pi.combine(2.0, 0.03, 0.04, 0.0, level=0.9)
     assert got["log_sd"] == pytest.approx(0.05)
     assert got["low"] == pytest.approx(2.0 * math.exp(-Z90 * 0.05))
     assert got["high"] == pytest.approx(2.0 * math.exp(Z90 * 0.05))
     assert got["half_width"] == pytest.approx(math.exp(Z90 * 0.05) - 1.0)
     assert got["low"] * got["high"] == pytest.approx(4.0)  # symmetric in the log
+    # the structural spread and the held-out error estimate the same error of the form: the larger counts
     wider = pi.combine(2.0, 0.03, 0.04, 0.12)
-    assert wider["log_sd"] == pytest.approx(0.13) and wider["high"] > got["high"]
+    assert wider["log_sd"] == pytest.approx(math.hypot(0.03, 0.12)) and wider["high"] > got["high"]
+    assert pi.combine(2.0, 0.03, 0.12, 0.04)["log_sd"] == pytest.approx(wider["log_sd"])
+    assert pi.combine(2.0, 0.03, 0.04, 0.12)["log_sd"] < math.sqrt(0.03 ** 2 + 0.04 ** 2 + 0.12 ** 2)
+
+
+def test_growth_is_net_of_the_held_out_predictions_own_identification_spread():
+    d = np.array([0.0, 0.0, 0.2, 0.5, 1.0])
+    form = np.sqrt(0.03 ** 2 + (0.1 * d) ** 2)
+    own = np.array([0.04, 0.02, 0.05, 0.03, 0.06])
+    g = pi.fit_growth(d, np.sqrt(form ** 2 + own ** 2), own)
+    assert g["sigma0"] == pytest.approx(0.03, rel=1e-6) and g["k"] == pytest.approx(0.1, rel=1e-6)
+    whole = pi.fit_growth(d, np.sqrt(form ** 2 + own ** 2))  # without it the spread is counted in the floor
+    assert whole["sigma0"] > 0.04
+    # unknown spreads (NaN) are not taken out: the wide side
+    g_nan = pi.fit_growth(d, np.sqrt(form ** 2 + own ** 2), np.full(5, np.nan))
+    assert g_nan["sigma0"] == pytest.approx(whole["sigma0"]) and g_nan["k"] == pytest.approx(whole["k"])
+    with pytest.raises(ValueError, match="differ in length"):
+        pi.fit_growth(d, form, own[:3])
 
 
 def test_a_component_that_could_not_be_measured_gives_no_interval_rather_than_a_narrow_one():
@@ -196,7 +214,12 @@ def test_growth_for_a_metric_no_record_carries_falls_back_to_the_yaw_rate_and_co
                      {"distance": math.nan, "errors": {}, "diverged": True}]}
     td = me.growth_for(cal, "tactical_diameter_L")
     assert td["source"] == "rms_yaw_rate" and td["n"] == 3  # two pairs and the divergence at the farthest distance
-    assert td["k"] > 0
+    assert td["k"] > 0 and td["net_of_own"] == 0
+    # a pair's own identification spread comes out of its squared error; a divergence keeps its whole error
+    cal["pairs"][0]["own_sd"] = {"rms_yaw_rate": 0.02}
+    cal["pairs"][1]["own_sd"] = {"rms_yaw_rate": 0.05}
+    net = me.growth_for(cal, "tactical_diameter_L")
+    assert net["net_of_own"] == 2 and net["sigma0"] == pytest.approx(0.0, abs=1e-6) and 0 < net["k"] < td["k"]
     assert me.growth_for(cal, "first_overshoot")["source"] == "rms_yaw_rate"  # one pair is not two
 
 

@@ -10,11 +10,30 @@ A predicted metric (a tactical diameter, an overshoot) is uncertain for three re
     model identified on their gentler ones, as it grows with the distance outside the training envelope.
 
 Each component is a standard deviation of the metric's logarithm (a relative error: a tactical diameter 10 % too
-wide is log 1.1 off). *Assumption, labelled*: the three are independent and normal on the log scale, so they add
-in quadrature, s^2 = s_a^2 + s_b^2 + s_c^2, and the interval at ``level`` is ``value * exp(+-z s)`` with z the
-normal quantile (1.645 at 90 %). They are not fully independent -- the held-out errors of (c) contain an
-identification spread and a structural error of their own -- so the sum may overstate the width; nothing here
-corrects for that.
+wide is log 1.1 off). How they combine (:func:`combine`) follows from what each measures. Write a prediction's log
+error as eps = eps_id + eps_form: the identification error (the coefficients the records leave uncertain) and the
+error of the model's form (terms it lacks, and how they show beyond the records). *Assumptions, labelled*: the two
+are independent and normal on the log scale, so var(eps) = s_id^2 + s_form^2, and the interval at ``level`` is
+``value * exp(+-z s)`` with s^2 that variance and z the normal quantile (1.645 at 90 %). Then:
+
+- (a) estimates s_id directly.
+- (c) measures a held-out prediction's whole error, e = eps_id,ho + eps_form,ho (+ the noise of the measured
+  metric), so E[e^2] = s_id,ho^2 + s_form^2(d) + s_noise^2: it holds an identification spread of its own, which the
+  prediction's (a) already counts. That spread is measured on the held-out fit itself -- its posterior draws
+  replayed through the record it predicts (``model_error.own_spread``) -- and taken out of each pair's squared
+  error before the growth is fitted (:func:`fit_growth`), so s_extrap estimates s_form at the distance d (the
+  measured metric's noise stays in: the measured value a prediction is compared with carries it too). Measured
+  rather than approximated by the main fit's s_id: the held-out fits have fewer records (their spread is the
+  larger), and the held-out metric is often another one (the RMS yaw rate standing in for a turn's diameter).
+- (b) and (c) are two estimates of the same s_form, not two errors: (b) from how far the models the records cannot
+  tell apart disagree at the prediction itself (it sees where the prediction goes, e.g. beyond the farthest
+  held-out record), (c) from how far the model's form actually missed on held-out records (it sees a term all the
+  alternatives lack). Adding them would count the form's error twice; the larger is taken (assumption: neither
+  overstates it), s_form = max(s_struct, s_extrap).
+
+So s^2 = s_id^2 + max(s_struct, s_extrap)^2. Not corrected for: (b)'s alternatives are themselves identified, so
+s_struct holds a little of their identification spread (the wide side); and the held-out pairs are the training
+records' own manoeuvres, so an error the training records share with the prediction is seen by neither.
 
 The **envelope** of a set of records (:func:`state_envelope`) is, per state, the 99th percentile of |v'|, |r'|, the
 drift angle |beta| and the rudder angle |delta| (v' = v/U, r' = r L/U, beta = atan2(-v, u), U the speed through the
@@ -81,24 +100,28 @@ def structural_log_sd(value: float, alternatives) -> tuple[float, int]:
     return float(np.sqrt(np.mean(np.log(alt / value) ** 2))), int(len(alt))
 
 
-def fit_growth(distance, error) -> dict:
+def fit_growth(distance, error, own_sd=None) -> dict:
     """The extrapolation error's growth with the distance outside the training envelope, from held-out pairs:
     ``error`` the |log(predicted / measured)| of a metric on a record, ``distance`` that record's distance outside
-    the envelope of the records the model was trained on. Model (assumption): the expected squared log error is
-    sigma0^2 + (k d)^2 -- a floor inside the envelope, growing linearly with the distance beyond it; sigma0^2 and
-    k^2 by non-negative least squares on the squared errors. Returns ``{'sigma0', 'k', 'n', 'd_max', 'note'}``;
-    with no pair, NaNs; with no pair outside the envelope, k is 0 and the note says the growth is not measured."""
+    the envelope of the records the model was trained on, ``own_sd`` (optional; 0 or NaN where unknown) the
+    held-out prediction's own identification spread, taken out of its squared error (see the module docstring):
+    the target is e^2 - own_sd^2. Model (assumption): the expected target is sigma0^2 + (k d)^2 -- a floor
+    inside the envelope, growing linearly with the distance beyond it; sigma0^2 and k^2 by non-negative least
+    squares on the targets (a pair whose own spread exceeds its error pulls them down: its error was mostly the
+    identification's). Returns ``{'sigma0', 'k', 'n', 'd_max', 'note'}``; with no pair, NaNs; with no pair
+    outside the envelope, k is 0 and the note says the growth is not measured."""
     d = np.asarray(distance, float).ravel()
     e = np.asarray(error, float).ravel()
-    if d.shape != e.shape:
-        raise ValueError(f"distance and error differ in length ({d.size} and {e.size})")
+    s = np.zeros_like(e) if own_sd is None else np.asarray(own_sd, float).ravel()
+    if d.shape != e.shape or s.shape != e.shape:
+        raise ValueError(f"distance, error and own_sd differ in length ({d.size}, {e.size} and {s.size})")
     ok = np.isfinite(d) & np.isfinite(e) & (d >= 0)
-    d, e = d[ok], np.abs(e[ok])
+    d, e, s = d[ok], np.abs(e[ok]), np.where(np.isfinite(s[ok]), s[ok], 0.0)
     if len(d) == 0:
         return {"sigma0": math.nan, "k": math.nan, "n": 0, "d_max": math.nan,
                 "note": "no held-out record to calibrate the extrapolation error on"}
     A = np.column_stack([np.ones_like(d), d ** 2])
-    (a, b), _ = optimize.nnls(A, e ** 2)
+    (a, b), _ = optimize.nnls(A, e ** 2 - s ** 2)
     note = ""
     if not np.any(d > 0):
         note = "no held-out record lay outside its training envelope: the growth with distance is not measured"
@@ -118,14 +141,15 @@ def extrapolation_log_sd(distance: float, growth: dict) -> float:
 
 
 def combine(value: float, s_id: float, s_struct: float, s_extrap: float, level: float = 0.9) -> dict:
-    """The interval of ``value`` from the three log-scale sds, in quadrature (see the module docstring).
-    Returns ``{'low', 'high', 'log_sd', 'half_width'}`` (half_width: relative, exp(z s) - 1). A component that
+    """The interval of ``value`` from the three log-scale sds: s^2 = s_id^2 + max(s_struct, s_extrap)^2 (the
+    identification spread and the error of the model's form, in quadrature; the structural spread and the
+    held-out extrapolation error are two estimates of the latter: see the module docstring). Returns ``{'low', 'high', 'log_sd', 'half_width'}`` (half_width: relative, exp(z s) - 1). A component that
     is NaN makes the interval NaN (an interval that leaves out what could not be measured would look narrower
     than it is); a value that is not positive has none (the log scale)."""
     parts = [float(s_id), float(s_struct), float(s_extrap)]
     if not (math.isfinite(value) and value > 0) or not all(math.isfinite(p) and p >= 0 for p in parts):
         return {"low": math.nan, "high": math.nan, "log_sd": math.nan, "half_width": math.nan}
-    s = math.sqrt(sum(p * p for p in parts))
+    s = math.hypot(parts[0], max(parts[1], parts[2]))
     w = z_of(level) * s
     return {"low": float(value * math.exp(-w)), "high": float(value * math.exp(w)), "log_sd": float(s),
             "half_width": float(math.exp(w) - 1.0)}

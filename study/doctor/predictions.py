@@ -34,18 +34,20 @@ DETERMINED_RATIO = 0.5
 EDGE = 0.05
 #: the method, as the report states it
 METHOD = (
-    "90 % interval = the value times exp(+-1.645 s), s^2 = s_id^2 + s_struct^2 + s_extrap^2 on the log scale "
-    "(assumption: independent, normal relative errors; they overlap, so the sum may overstate the width). s_id: "
-    "the spread of the metric over draws from the fit's posterior; s_struct: its root-mean-square log deviation "
-    "over the other models the records cannot tell apart (training and validation errors within the doctor's "
-    "tie of the model's own or lower; the anchor's sd halved and doubled; the anchor set itself when it fits the "
-    "training records as well); s_extrap = sqrt(s0^2 + (k d)^2): the relative error of the training records "
-    "predicted from the others (each left out in turn; the harsher half from the gentler half), s0 the floor and k "
-    "its growth with d, the distance outside the training envelope (the largest relative excess of |v'|, |r'|, "
-    "the drift angle and the rudder angle over the records' 99th percentiles). The metric's own held-out errors "
-    "when two or more training records carry it, else those of the RMS yaw rate at speed. Not covered: errors "
-    "the training records share with the prediction (a sensor bias, the facility), a growth steeper than linear "
-    "beyond the farthest held-out record, and conditions no record has (another depth, speed or loading).")
+    "90 % interval = the value times exp(+-1.645 s), s^2 = s_id^2 + max(s_struct, s_extrap)^2 on the log scale "
+    "(assumption: independent, normal relative errors of identification and of the model's form; s_struct and "
+    "s_extrap are two estimates of the latter, so the larger is taken rather than both added). s_id: the spread of "
+    "the metric over draws from the fit's posterior; s_struct: its root-mean-square log deviation over the other "
+    "models the records cannot tell apart (training and validation errors within the doctor's tie of the model's "
+    "own or lower; the anchor's sd halved and doubled; the anchor set itself when it fits the training records as "
+    "well); s_extrap = sqrt(s0^2 + (k d)^2): the relative error of the training records predicted from the others "
+    "(each left out in turn; the harsher half from the gentler half), each held-out prediction's own "
+    "identification spread (its fit's posterior draws replayed through it) taken out in quadrature, s0 the floor "
+    "and k its growth with d, the distance outside the training envelope (the largest relative excess of |v'|, "
+    "|r'|, the drift angle and the rudder angle over the records' 99th percentiles). The metric's own held-out "
+    "errors when two or more training records carry it, else those of the RMS yaw rate at speed. Not covered: "
+    "errors the training records share with the prediction (a sensor bias, the facility), a growth steeper than "
+    "linear beyond the farthest held-out record, and conditions no record has (another depth, speed or loading).")
 
 
 def _finite(x) -> bool:

@@ -21,8 +21,10 @@ Choices, labelled:
   since a manoeuvre nobody measured was not run in their set-up), ``keep_setup_effects`` keeps them. The result
   says which were left out (``setup_left_out``).
 - *Interval* (``study.doctor.predictions.METHOD``): the posterior draws' spread, the spread over models the
-  records cannot tell apart, and an extrapolation error calibrated on the training records (held out in turn)
-  that grows with the distance outside their envelope, added in quadrature on the log scale (an assumption).
+  records cannot tell apart, and an extrapolation error calibrated on the training records (held out in turn, net
+  of the held-out fits' own identification spread) that grows with the distance outside their envelope; on the
+  log scale s^2 = s_id^2 + max(s_struct, s_extrap)^2, the last two being two estimates of the model's form error
+  (an assumption; ``study.doctor.prediction_interval``).
   ``td_low``/``td_high`` keep the draws' interval alone (identification spread only), for comparison.
 
 ``python -m study.doctor.turn_prediction`` writes the KVLCC2 case (HSVA's zigzags, ``../shared/data/real``) to

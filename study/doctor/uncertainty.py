@@ -166,12 +166,13 @@ def model_uncertainty(doctor, ev, rows: list, frames: dict, role: str, tie: floa
 
 
 def calibration_summary(cal: dict) -> dict:
-    """The calibration as the report shows it: the splits, the held-out pairs (record, distance, the surrogate's
-    error) and the surrogate's growth."""
+    """The calibration as the report shows it: the splits, the held-out pairs (record, distance, the metrics'
+    errors and the held-out predictions' own identification spreads, taken out of them) and the surrogate's
+    growth."""
     return {"splits": cal["splits"], "growth": me.growth_for(cal, me.SURROGATE),
             "pairs": [{"record": p["record"], "split": p["split"], "distance": p["distance"],
                        "state": p["state"], "diverged": p.get("diverged", False),
-                       "errors": p["errors"]} for p in cal["pairs"]]}
+                       "errors": p["errors"], "own_sd": p.get("own_sd", {})} for p in cal["pairs"]]}
 
 
 def predicted_turns(doctor, ev, tie: float, level: float = 0.9) -> list:

@@ -109,6 +109,34 @@ def test_identified_hull_two_hidden_effects_are_found_one_after_the_other():
     assert p["yaw_bias_N"] == pytest.approx(-7.0e-4, rel=0.3)
 
 
+@pytest.mark.slow  # two identified-hull doctor runs, 60-90 s each
+@pytest.mark.parametrize("identified", [False, True], ids=["known", "identified_hull"])
+def test_a_late_steering_gear_is_told_from_a_slow_one(identified):
+    """A steering gear that is late (1.2 s dead time) rather than slow (no lag), the record logging the command:
+    rudder_dynamics is named with the dead time near 1.2 s and a lag that stays small."""
+    example = {"environment": [{"name": "rudder_dynamics", "lag": 0.0, "delay": 1.2}], "rudder_log": "command"}
+    d, rep, _ = run_case("late_steering", example, identified)
+    assert rep["missing_effect"] == "rudder_dynamics", rep["verdict"]
+    p = rep["ranking"][0]["parameters"]
+    assert p["rudder_delay"] == pytest.approx(1.2, abs=0.2) and p["rudder_lag"] < 0.5
+    ladder = [s for s in rep["ladder"] if not s.get("rejected")]
+    assert ladder[1]["scored_error"] <= 0.5 * ladder[0]["scored_error"]
+
+
+@pytest.mark.slow  # 90 s: the identified hull, two effects of different kinds
+def test_identified_hull_wind_and_a_late_steering_gear_are_both_named():
+    example = {"environment": [{"name": "wind", "speed_U0": 5.0, "direction_deg": 250.0},
+                               {"name": "rudder_dynamics", "lag": 0.0, "delay": 1.0}], "rudder_log": "command"}
+    d, rep, _ = run_case("wind_late", example, True)
+    steps = [s["step"] for s in rep["ladder"] if not s.get("rejected")]
+    assert set(steps[1:3]) == {"+ wind", "+ rudder_dynamics"}, steps
+    errs = [s["scored_error"] for s in rep["ladder"] if not s.get("rejected")]
+    assert errs[2] < errs[1] < errs[0]
+    p = rep["final"]["parameters"]
+    assert p["wind_speed"] == pytest.approx(5.0 * U0, rel=0.25)
+    assert p["rudder_delay"] == pytest.approx(1.0, abs=0.25)
+
+
 def test_a_users_own_effect_from_outside_the_package(monkeypatch):
     """docs/examples/effects: a yaw moment c n^2, class and YAML outside the package, found through
     effect_path. The truth: the simulator's constant yaw moment of the same size (n is constant in these

@@ -8,7 +8,7 @@ import pytest
 
 from study.doctor.diagnose import Doctor, Options
 from study.doctor.html import render_html
-from study.doctor.separating import DECISIVE, MENU, SPEEDS_U0, channel_noise, divergence
+from study.doctor.separating import MENU, SEPARATES, SPEEDS_U0, channel_noise, separation
 
 from test_doctor import KNOWN, VESSEL, records, scaled
 
@@ -17,18 +17,18 @@ def _frame(t, **cols):
     return pd.DataFrame({"time": t, **cols})
 
 
-def test_the_score_is_half_the_sum_of_squared_differences_in_noise_sd():
+def test_the_score_is_the_rms_distance_in_units_of_the_misfit():
     t = np.arange(0.0, 10.0, 0.1)
     a = _frame(t, u=np.ones_like(t), v=np.zeros_like(t), r=np.zeros_like(t))
     b = _frame(t, u=np.ones_like(t) + 0.02, v=np.zeros_like(t), r=np.zeros_like(t))
-    sigma = {"u": 0.01, "v": 0.001, "r": 0.001}
-    d = divergence(a, b, sigma, dt_record=0.1)
-    assert d["D"] == pytest.approx(0.5 * len(t) * 2.0 ** 2) and d["channel"] == "u"
-    assert d["max_sd"] == pytest.approx(2.0)
-    # at half the sampling rate a record holds half the samples: half the evidence
-    assert divergence(a, b, sigma, dt_record=0.2)["D"] == pytest.approx(d["D"] / 2)
-    assert divergence(a, a, sigma, 0.1)["D"] == 0.0
-    assert divergence(b, a, sigma, 0.1)["D"] == pytest.approx(d["D"])
+    scale = {"u": 0.01, "v": 0.001, "r": 0.001}
+    d = separation(a, b, scale)
+    assert d["S"] == pytest.approx(2.0) and d["channel"] == "u" and d["max"] == pytest.approx(2.0)
+    # a second channel apart by the same amount adds in quadrature; the record's length does not matter
+    b2 = b.assign(r=0.002)
+    assert separation(a, b2, scale)["S"] == pytest.approx(np.sqrt(8.0))
+    assert separation(a.iloc[:50], b.iloc[:50], scale)["S"] == pytest.approx(2.0)
+    assert separation(a, a, scale)["S"] == 0.0 and separation(b, a, scale)["S"] == pytest.approx(2.0)
 
 
 def test_the_noise_is_the_records_own_white_noise():
@@ -71,11 +71,13 @@ def test_a_tie_recommends_the_manoeuvre_where_the_two_fits_differ_most(tied):
     sep = rep["separating_maneuver"]
     assert sep["pair"] == ["current", "wind"]
     assert len(sep["menu"]) == len(MENU) * 2 * len(SPEEDS_U0)
-    D = [m["D"] for m in sep["menu"] if np.isfinite(m["D"])]
-    assert D == sorted(D, reverse=True) and sep["best"] == sep["menu"][0]
+    S = [m["S"] for m in sep["menu"] if np.isfinite(m["S"])]
+    assert S == sorted(S, reverse=True) and sep["best"] == sep["menu"][0]
     assert len(sep["recorded"]) == len(d.train_df) + len(d.val_df)
-    # a current and a wind of these sizes predict different turns: some manoeuvre separates them decisively
-    assert sep["best"]["D"] > DECISIVE
+    # the scale is the current fit's misfit where it exceeds the sensors' noise (it does: the model is exact)
+    assert set(sep["scale"]) == {"u", "v", "r"} and all(v > 0 for v in sep["scale"].values())
+    # a current and a wind of these sizes predict different turns: some manoeuvre separates them
+    assert sep["best"]["S"] > SEPARATES
     best = sep["best"]
     assert f"to {best['side']}" in sep["text"] and sep["text"] in rep["notes"]
     html = render_html(rep)

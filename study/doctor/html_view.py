@@ -391,13 +391,13 @@ def separating(r: dict) -> dict | None:
     menu = [m for m in sep.get("menu") or [] if isinstance(m, Mapping)]
     if not menu:
         return None
-    row = lambda m, what: {"what": what, "D": num(finite(m.get("D")), 3), "channel": as_text(m.get("channel")),  # noqa: E731
-                           "max_sd": num(finite(m.get("max_sd")), 2), "diverged": as_text(m.get("diverged"))}
+    row = lambda m, what: {"what": what, "S": num(finite(m.get("S")), 2), "channel": as_text(m.get("channel")),  # noqa: E731
+                           "max": num(finite(m.get("max")), 2), "diverged": as_text(m.get("diverged"))}
     rows = [row(m, f"{as_text(m.get('maneuver'))} to {as_text(m.get('side'))}, "
                    f"{100 * (finite(m.get('speed_U0')) or 0):.0f} % of the service speed") for m in menu[:8]]
     recorded = [row(m, as_text(m.get("record"))) for m in sep.get("recorded") or [] if isinstance(m, Mapping)]
     return _section("separating", pair=names(sep.get("pair") or []), text=as_text(sep.get("text")), rows=rows,
-                    recorded=recorded, sigma=[f"{c}: {num(finite(v), 3)}" for c, v in (sep.get("sigma") or {}).items()])
+                    recorded=recorded, scale=[f"{c}: {num(finite(v), 3)}" for c, v in (sep.get("scale") or {}).items()])
 
 
 def rudder_residual(r: dict) -> dict | None:

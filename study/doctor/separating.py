@@ -7,19 +7,20 @@ deg turning circles, each to starboard and to port, from a steady approach at th
 against the records' measurement noise. The same score is computed for the records already run (each fit
 replayed through them), so the recommendation says how much more a new record would tell than the ones in hand.
 
-The score of a manoeuvre is the expected log-likelihood ratio a record of it would give for the right
-explanation over the other (the Kullback-Leibler divergence of two Gaussian records with the same noise):
+The score of a manoeuvre is how far apart the two predictions lie, in units of how far the fits already miss the
+records:
 
-    D = 1/2 sum_t sum_c ((a_c(t) - b_c(t)) / sigma_c)^2,
+    S = sqrt( mean_t sum_c ((a_c(t) - b_c(t)) / s_c)^2 ),
 
-summed over the samples at the records' sampling interval and over the velocities both simulate and the records
-hold (u, v, r). Heading and positions are left out: they integrate the velocities, so any small difference
-between two fits grows along a long manoeuvre and would swamp D whether or not it is the effects' own. Assumptions,
-labelled: the measurement noise is white, of the size the training
-records show (each channel's sigma by the difference method, :func:`study.state_estimation.noise_std`), and each
-fit is taken as exact (its own identification spread is left out, so D is the evidence about the two
-explanations, not about their parameters). D of about 3 or more favours the right one by a likelihood ratio of
-20 on average; a record whose D is below 1 cannot tell them apart.
+over the velocities both simulate and the records hold (u, v, r), where s_c is the larger of the channel's white
+measurement noise (the difference method, :func:`study.state_estimation.noise_std`) and the RMS misfit of the
+first candidate's replays of the records in hand. Heading and positions are left out: they integrate the
+velocities, so any small difference between two fits grows along a long manoeuvre. Why the misfit and not the
+sensor noise alone: on real records the model's own error is far larger than the sensors' (and velocities derived
+from positions are smooth), so two fits that differ by less than they already miss cannot be told apart by one more
+record, however long. Assumption, labelled: a manoeuvre separates the two when S is above :data:`SEPARATES` (their
+predictions differ by more than twice what either misses the records by); each fit is taken as exact (its own
+identification spread is left out).
 """
 from __future__ import annotations
 
@@ -34,8 +35,8 @@ MENU = ("zigzag_10_10", "zigzag_20_20", "zigzag_20_10", "zigzag_35_35", "turning
 SPEEDS_U0 = (1.0, 0.6)
 #: the channels compared, where the records hold them (velocities: see the module docstring)
 CHANNELS = ("u", "v", "r")
-#: D at which a record favours the right explanation by a likelihood ratio of about 20 (e^3)
-DECISIVE = 3.0
+#: S above which a record of the manoeuvre shows the two apart (assumption: twice the misfit)
+SEPARATES = 2.0
 
 
 def channel_noise(records: list) -> dict:
@@ -52,28 +53,39 @@ def channel_noise(records: list) -> dict:
     return out
 
 
-def divergence(a: pd.DataFrame, b: pd.DataFrame, sigma: dict, dt_record: float) -> dict:
-    """``D`` of two predictions of one manoeuvre (on ``a``'s time grid, ``b`` interpolated), with the channel
-    that carries most of it and the largest difference in noise sd."""
+def separation(a: pd.DataFrame, b: pd.DataFrame, scale: dict) -> dict:
+    """``S`` of two predictions of one manoeuvre (on ``a``'s time grid, ``b`` interpolated), the channel that carries
+    most of it and the largest difference, each in units of ``scale`` (per channel)."""
     t = a["time"].to_numpy(float)
     tb = b["time"].to_numpy(float)
     keep = t <= tb[-1]
     t = t[keep]
-    if len(t) < 2:
-        return {"D": float("nan"), "channel": None, "max_sd": float("nan")}
-    step = float(np.median(np.diff(t)))
     per, worst = {}, 0.0
-    for c, s in sigma.items():
-        if c not in a or c not in b:
+    for c, s in scale.items():
+        if c not in a or c not in b or len(t) < 2:
             continue
-        xa = a[c].to_numpy(float)[keep]
-        xb = np.interp(t, tb, b[c].to_numpy(float))
-        z = (xa - xb) / s
-        per[c] = 0.5 * float(np.sum(z ** 2)) * step / dt_record
+        z = (a[c].to_numpy(float)[keep] - np.interp(t, tb, b[c].to_numpy(float))) / s
+        per[c] = float(np.mean(z ** 2))
         worst = max(worst, float(np.max(np.abs(z))))
     if not per:
-        return {"D": float("nan"), "channel": None, "max_sd": float("nan")}
-    return {"D": float(sum(per.values())), "channel": max(per, key=per.get), "max_sd": worst}
+        return {"S": float("nan"), "channel": None, "max": float("nan")}
+    return {"S": float(np.sqrt(sum(per.values()))), "channel": max(per, key=per.get), "max": worst}
+
+
+def misfit(problem, fit, records: list, infos=None) -> dict:
+    """Each channel's RMS of the records minus ``fit``'s replays of them (on the replays' time grid), over the
+    records whose replay does not diverge."""
+    sq = {c: [] for c in CHANNELS}
+    for i, df in enumerate(records):
+        pred = problem.predict(fit, df, infos[i] if infos is not None else None)
+        if pred is None:
+            continue
+        t = pred["time"].to_numpy(float)
+        for c in CHANNELS:
+            if c in df and c in pred:
+                meas = np.interp(t, df["time"].to_numpy(float), df[c].to_numpy(float))
+                sq[c].append((meas - pred[c].to_numpy(float)) ** 2)
+    return {c: float(np.sqrt(np.mean(np.concatenate(v)))) for c, v in sq.items() if v}
 
 
 def _maneuver(name: str, side: str) -> dict:
@@ -118,9 +130,9 @@ def separating_maneuvers(problem, fits: dict, records: list, names: list, infos=
         records in hand), ``best`` (the top row) and ``text`` (one sentence for the report).
     """
     (la, fa), (lb, fb) = list(fits.items())[:2]
-    sigma = channel_noise(records)
-    dts = [float(np.median(np.diff(df["time"].to_numpy(float)))) for df in records if len(df) > 1]
-    dt_rec = float(np.median(dts)) if dts else 0.1
+    noise, miss = channel_noise(records), misfit(problem, fa, records, infos)
+    scale = {c: max(noise.get(c, 0.0), miss.get(c, 0.0)) for c in CHANNELS if c in noise or c in miss}
+    scale = {c: v for c, v in scale.items() if v > 0 and math.isfinite(v)}
     psi0 = float(np.median([df["psi"].iloc[0] for df in records])) if records else 0.0
     menu = []
     for name in MENU:
@@ -131,26 +143,26 @@ def separating_maneuvers(problem, fits: dict, records: list, names: list, infos=
                 pa, pb = _simulate(problem, fa, man, u0, psi0), _simulate(problem, fb, man, u0, psi0)
                 row = {"maneuver": name, "side": side, "speed_U0": share}
                 if pa is None or pb is None:
-                    row.update(D=float("nan"), channel=None, max_sd=float("nan"),
+                    row.update(S=float("nan"), channel=None, max=float("nan"),
                                diverged=", ".join(lab for lab, p in ((la, pa), (lb, pb)) if p is None))
                 else:
-                    row.update(divergence(pa, pb, sigma, dt_rec))
+                    row.update(separation(pa, pb, scale))
                 menu.append(row)
-    menu.sort(key=lambda r: -r["D"] if np.isfinite(r["D"]) else math.inf)
+    menu.sort(key=lambda r: -r["S"] if np.isfinite(r["S"]) else math.inf)
     recorded = []
     for i, (df, name) in enumerate(zip(records, names)):
         info = infos[i] if infos is not None else None
         pa, pb = problem.predict(fa, df, info), problem.predict(fb, df, info)
         row = {"record": name}
         if pa is None or pb is None:
-            row.update(D=float("nan"), channel=None, max_sd=float("nan"),
+            row.update(S=float("nan"), channel=None, max=float("nan"),
                        diverged=", ".join(lab for lab, p in ((la, pa), (lb, pb)) if p is None))
         else:
-            row.update(divergence(pa, pb, sigma, dt_rec))
+            row.update(separation(pa, pb, scale))
         recorded.append(row)
-    best = next((r for r in menu if np.isfinite(r["D"])), None)
-    return {"pair": [la, lb], "sigma": sigma, "menu": menu, "recorded": recorded, "best": best,
-            "text": _sentence(la, lb, best, recorded)}
+    best = next((r for r in menu if np.isfinite(r["S"])), None)
+    return {"pair": [la, lb], "scale": scale, "noise": noise, "misfit": miss, "menu": menu, "recorded": recorded,
+            "best": best, "text": _sentence(la, lb, best, recorded)}
 
 
 def _sentence(la: str, lb: str, best: dict | None, recorded: list) -> str:
@@ -158,10 +170,11 @@ def _sentence(la: str, lb: str, best: dict | None, recorded: list) -> str:
         return f"no manoeuvre of the menu could be simulated with both {la} and {lb}: none is recommended"
     speed = "the service speed" if best["speed_U0"] == 1.0 else f"{100 * best['speed_U0']:.0f} % of the service speed"
     what = best["maneuver"].replace("zigzag_", "zigzag ").replace("turning_", "turning circle ").replace("_", "/")
-    rec = [r["D"] for r in recorded if np.isfinite(r["D"])]
-    have = (f"; the records in hand give D = {max(rec):.2g} at most" if rec else "")
-    verdict = ("a record of it would settle it" if best["D"] >= DECISIVE else
-               "even that would hardly settle it: more than one such record, or a larger manoeuvre, is needed")
-    return (f"to tell {la} from {lb}: a {what} to {best['side']} from {speed}, where their predictions differ most "
-            f"against the records' noise (expected log-likelihood ratio D = {best['D']:.3g}, mostly in {best['channel']}, "
-            f"up to {best['max_sd']:.2g} noise sd){have}: {verdict}")
+    rec = [r["S"] for r in recorded if np.isfinite(r["S"])]
+    have = f"; on the records in hand they lie {max(rec):.2g} apart at most" if rec else ""
+    verdict = ("a record of it would tell them apart" if best["S"] >= SEPARATES else
+               f"that is less than {SEPARATES:g} times the misfit: no manoeuvre of the menu would settle it, and the "
+               "records cannot tell the two explanations apart")
+    return (f"to tell {la} from {lb}: a {what} to {best['side']} from {speed}, where their predictions lie furthest "
+            f"apart, {best['S']:.2g} times what the fits already miss the records by (mostly in {best['channel']}){have}: "
+            f"{verdict}")

@@ -172,9 +172,15 @@ def _sentence(la: str, lb: str, best: dict | None, recorded: list) -> str:
     what = best["maneuver"].replace("zigzag_", "zigzag ").replace("turning_", "turning circle ").replace("_", "/")
     rec = [r["S"] for r in recorded if np.isfinite(r["S"])]
     have = f"; on the records in hand they lie {max(rec):.2g} apart at most" if rec else ""
-    verdict = ("a record of it would tell them apart" if best["S"] >= SEPARATES else
-               f"that is less than {SEPARATES:g} times the misfit: no manoeuvre of the menu would settle it, and the "
-               "records cannot tell the two explanations apart")
+    if rec and max(rec) >= best["S"]:
+        verdict = ("the records in hand already show the two apart as far, so the doubt is not for want of a "
+                   "manoeuvre: both miss the records about equally, so neither explanation alone is right (or a "
+                   "third effect is missing)")
+    elif best["S"] >= SEPARATES:
+        verdict = "a record of it would tell them apart"
+    else:
+        verdict = (f"that is less than {SEPARATES:g} times the misfit: no manoeuvre of the menu would settle it, and "
+                   "the records cannot tell the two explanations apart")
     return (f"to tell {la} from {lb}: a {what} to {best['side']} from {speed}, where their predictions lie furthest "
             f"apart, {best['S']:.2g} times what the fits already miss the records by (mostly in {best['channel']}){have}: "
             f"{verdict}")

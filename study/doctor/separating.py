@@ -140,29 +140,26 @@ def separating_maneuvers(problem, fits: dict, records: list, names: list, infos=
             man = _maneuver(name, side)
             for share in SPEEDS_U0:
                 u0 = share * problem.U0
-                pa, pb = _simulate(problem, fa, man, u0, psi0), _simulate(problem, fb, man, u0, psi0)
-                row = {"maneuver": name, "side": side, "speed_U0": share}
-                if pa is None or pb is None:
-                    row.update(S=float("nan"), channel=None, max=float("nan"),
-                               diverged=", ".join(lab for lab, p in ((la, pa), (lb, pb)) if p is None))
-                else:
-                    row.update(separation(pa, pb, scale))
-                menu.append(row)
+                pred = {la: _simulate(problem, fa, man, u0, psi0), lb: _simulate(problem, fb, man, u0, psi0)}
+                menu.append({"maneuver": name, "side": side, "speed_U0": share, **_scored(pred, scale)})
     menu.sort(key=lambda r: -r["S"] if np.isfinite(r["S"]) else math.inf)
     recorded = []
     for i, (df, name) in enumerate(zip(records, names)):
         info = infos[i] if infos is not None else None
-        pa, pb = problem.predict(fa, df, info), problem.predict(fb, df, info)
-        row = {"record": name}
-        if pa is None or pb is None:
-            row.update(S=float("nan"), channel=None, max=float("nan"),
-                       diverged=", ".join(lab for lab, p in ((la, pa), (lb, pb)) if p is None))
-        else:
-            row.update(separation(pa, pb, scale))
-        recorded.append(row)
+        pred = {la: problem.predict(fa, df, info), lb: problem.predict(fb, df, info)}
+        recorded.append({"record": name, **_scored(pred, scale)})
     best = next((r for r in menu if np.isfinite(r["S"])), None)
     return {"pair": [la, lb], "scale": scale, "noise": noise, "misfit": miss, "menu": menu, "recorded": recorded,
             "best": best, "text": _sentence(la, lb, best, recorded)}
+
+
+def _scored(pred: dict, scale: dict) -> dict:
+    """:func:`separation` of the two predictions ``{label: frame or None}``, or which of them diverged."""
+    (la, pa), (lb, pb) = pred.items()
+    if pa is None or pb is None:
+        return {"S": float("nan"), "channel": None, "max": float("nan"),
+                "diverged": ", ".join(lab for lab, p in pred.items() if p is None)}
+    return separation(pa, pb, scale)
 
 
 def _sentence(la: str, lb: str, best: dict | None, recorded: list) -> str:

@@ -1,0 +1,60 @@
+"""How far a replay is from a record: per channel RMSE and NRMSE, the track error, and the doctor's single
+number (the mean NRMSE of u, v, r and psi over records); a diverged replay is inf, never a percentage."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+
+CHANNELS = ("u", "v", "r", "psi")
+UNITS = {"u": "m/s", "v": "m/s", "r": "rad/s", "psi": "rad", "track": "m"}
+
+
+#: the NRMSE counted for a channel whose replay stayed within the envelope but is off by more: beyond ten times
+#: the channel's spread a prediction has no shape left to compare. A DIVERGED replay is not capped: its errors
+#: are inf and it is reported as diverged (never as a percentage).
+NRMSE_CAP = 10.0
+
+
+def record_errors(meas: pd.DataFrame, pred: pd.DataFrame | None, floors: dict | None = None) -> dict:
+    """Per channel RMSE and NRMSE (RMSE over the measured spread, or over ``floors[c]`` when that is larger; at
+    most ``NRMSE_CAP``) of a prediction; the track error (RMSE of the position over the track's extent); a
+    diverged prediction (None) has inf errors and ``diverged`` set."""
+    out = {}
+    if pred is None:
+        for c in CHANNELS + ("track",):
+            out[c] = {"rmse": math.inf, "nrmse": math.inf}
+        out["diverged"] = True
+        return out
+    t = pred["time"].to_numpy()
+    m = meas[(meas["time"] >= t[0]) & (meas["time"] <= t[-1])]
+    for c in CHANNELS:
+        a = m[c].to_numpy()
+        b = np.interp(m["time"].to_numpy(), t, pred[c].to_numpy())
+        rmse = float(np.sqrt(np.mean((b - a) ** 2)))
+        sd = max(float(np.std(a)), (floors or {}).get(c, 0.0))
+        out[c] = {"rmse": rmse, "nrmse": min(rmse / sd, NRMSE_CAP) if sd > 0 else NRMSE_CAP}
+    dx = np.interp(m["time"].to_numpy(), t, pred["x0"].to_numpy()) - m["x0"].to_numpy()
+    dy = np.interp(m["time"].to_numpy(), t, pred["y0"].to_numpy()) - m["y0"].to_numpy()
+    tr = float(np.sqrt(np.mean(dx ** 2 + dy ** 2)))
+    span = float(np.hypot(np.ptp(m["x0"].to_numpy()), np.ptp(m["y0"].to_numpy())))
+    out["track"] = {"rmse": tr, "nrmse": min(tr / span, NRMSE_CAP) if span > 0 else NRMSE_CAP}
+    out["diverged"] = False
+    return out
+
+
+def record_error(errors_of_record: dict) -> float:
+    """One record's validation error: the mean NRMSE of u, v, r and psi (inf when its replay diverged)."""
+    return float(np.mean([errors_of_record[c]["nrmse"] for c in CHANNELS]))
+
+
+def validation_error(errors: dict) -> float:
+    """The doctor's single number: the mean over records of the mean NRMSE of u, v, r and psi; inf when a
+    replay diverged (see ``diverged_records``)."""
+    vals = [record_error(errors[r]) for r in errors]
+    return float(np.mean(vals)) if vals else math.nan
+
+
+def diverged_records(errors: dict) -> list:
+    return [r for r, e in errors.items() if e.get("diverged")]

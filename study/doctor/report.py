@@ -128,8 +128,6 @@ def write_report(doctor, out_dir, vessel: str, model: str, overwrite: bool = Fal
     import json
     from pathlib import Path
 
-    from . import plots
-    from ..identify.with_effects import residuals
     from .html import render_html
 
     out = Path(out_dir)
@@ -141,6 +139,29 @@ def write_report(doctor, out_dir, vessel: str, model: str, overwrite: bool = Fal
     pb, pf = predictions(doctor, base), predictions(doctor, final)
     meas = dict(zip(doctor.val_names, doctor.val_df)) if doctor.mode == "given" else \
         dict(zip(doctor.train_names, doctor.train_df))
+    figs, listing, windows = _figures(doctor, rep, meas, pb, pf)
+    mm, uncertainty = _manoeuvres(doctor, rep, meas, pb, pf)
+    _put_figures(out, figs)
+    html_report = {**_jsonable(rep), "title": f"Model doctor: {model} on {vessel}", "created_by":
+                   "python -m study.diagnose", "vessel": vessel, "model": model,
+                   "structure": doctor.problem.structure.name, "worst_windows": windows,
+                   "catalogue": catalogue_rows(doctor), "figures": listing, "maneuver_metrics": mm,
+                   "prediction_uncertainty": uncertainty,
+                   "conventions": CONVENTIONS, "definitions": DEFINITIONS, "provenance": provenance(doctor)}
+    (out / "report.json").write_text(json.dumps(html_report, indent=1, allow_nan=True, default=float),
+                                     encoding="utf-8")
+    (out / "report.html").write_text(render_html(html_report, figs), encoding="utf-8")
+    return html_report
+
+
+def _figures(doctor, rep: dict, meas: dict, pb: dict, pf: dict) -> tuple:
+    """(figure name -> PNG bytes, their listing for the page, the worst windows) of a report: measured against
+    predicted per record, the residual forces, the error's growth along each record and the ladder."""
+    from . import plots
+    from ..identify.with_effects import residuals
+
+    r = doctor.result
+    base, final = r["base"], r["final"]
     figs, listing = {}, []
 
     def add(name, data, title, caption, section):
@@ -163,7 +184,7 @@ def write_report(doctor, out_dir, vessel: str, model: str, overwrite: bool = Fal
              "loop with the record's rudder and propeller." if fl else
              "Measured (dots) and the baseline model (red), replayed open loop with the record's rudder and "
              "propeller (no effect was added).") + pair_text +
-            (f" The baseline replay DIVERGED on this record and is not drawn." if name in base.diverged else ""),
+            (" The baseline replay DIVERGED on this record and is not drawn." if name in base.diverged else ""),
             "compare")
     res = residuals(doctor.problem, base.fit, doctor.train_names)
     add("residuals_time.png", plots.residuals_time(res), "Residual forces over time",
@@ -185,19 +206,30 @@ def write_report(doctor, out_dir, vessel: str, model: str, overwrite: bool = Fal
         "psi over the validation records) of the baseline and of each step with an effect added" +
         ("; a rejected step (its error not lower by 10 %) is hatched" if rej else "") +
         ("; a diverged replay is marked, with no bar" if div else "") + ".", "ladder")
-    from ..maneuver_metrics import maneuver_metrics
+    return figs, listing, windows
 
+
+def _manoeuvres(doctor, rep: dict, meas: dict, pb: dict, pf: dict) -> tuple:
+    """(the manoeuvre metrics rows of every record, baseline and final, with their intervals; the predicted
+    turns and what carries them); each candidate's effect on the metrics is added to ``rep``'s ranking."""
+    from ..maneuver_metrics import maneuver_metrics
+    from .uncertainty import annotate
+
+    base, final = doctor.result["base"], doctor.result["final"]
     mm = []
     mb = manoeuvre_predictions(doctor, base, pb)
     mf = mb if final is base else manoeuvre_predictions(doctor, final, pf)  # no effect added: the same replays
     for name, df in meas.items():
         mm += maneuver_metrics(name, df, mb.get(name), mf.get(name), doctor.problem.L)
     candidate_metrics(doctor, rep, meas, mb)
-    from .uncertainty import annotate
-
     uncertainty = annotate(doctor, mm, base, final, mb, mf)  # intervals, extrapolation, carriers; predicted turns
-    # the figures go to a temporary folder first and are moved in at once: a doctor stopped meanwhile leaves no
-    # figures/ that would make a rerun refuse ("already holds figures") though no report exists
+    return mm, uncertainty
+
+
+def _put_figures(out, figs: dict) -> None:
+    """Write the figures into ``out/figures``: to a temporary folder first, moved in at once, so a doctor stopped
+    meanwhile leaves no figures/ that would make a rerun refuse ("already holds figures") though no report
+    exists."""
     import os
     import shutil
 
@@ -212,16 +244,6 @@ def write_report(doctor, out_dir, vessel: str, model: str, overwrite: bool = Fal
         partial.rmdir()
     else:
         os.replace(partial, final_dir)
-    html_report = {**_jsonable(rep), "title": f"Model doctor: {model} on {vessel}", "created_by":
-                   "python -m study.diagnose", "vessel": vessel, "model": model,
-                   "structure": doctor.problem.structure.name, "worst_windows": windows,
-                   "catalogue": catalogue_rows(doctor), "figures": listing, "maneuver_metrics": mm,
-                   "prediction_uncertainty": uncertainty,
-                   "conventions": CONVENTIONS, "definitions": DEFINITIONS, "provenance": provenance(doctor)}
-    (out / "report.json").write_text(json.dumps(html_report, indent=1, allow_nan=True, default=float),
-                                     encoding="utf-8")
-    (out / "report.html").write_text(render_html(html_report, figs), encoding="utf-8")
-    return html_report
 
 
 #: shown on the report page beside the numbers they explain

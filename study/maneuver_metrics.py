@@ -189,7 +189,7 @@ def _kind(measured) -> tuple[str, float | None]:
 def manoeuvre_start(measured) -> float | None:
     """The time a measured record's manoeuvre starts (where :func:`maneuver_metrics` cuts the records), None
     when it is taken whole. The doctor replays a cut record from its measured state there (see
-    ``study.doctor.diagnose.manoeuvre_predictions``)."""
+    ``study.doctor.report.manoeuvre_predictions``)."""
     return _kind(measured)[1]
 
 

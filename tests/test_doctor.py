@@ -247,7 +247,7 @@ def test_a_real_report_renders_in_chromium(browser, tmp_path):
     from selenium.webdriver.common.by import By
     from selenium.webdriver.support.ui import WebDriverWait
 
-    from study.doctor.diagnose import write_report
+    from study.doctor.report import write_report
 
     d, rep = diagnose("current")
     html_rep = write_report(d, tmp_path, "kvlcc2_l7", "known")

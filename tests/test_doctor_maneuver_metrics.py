@@ -201,12 +201,12 @@ def test_the_html_table_shows_names_units_and_na():
 
 
 def test_the_doctor_replays_a_record_with_an_approach_from_the_manoeuvre_start():
-    """study.doctor.diagnose.manoeuvre_predictions: the replay the metrics compare starts where the manoeuvre
+    """study.doctor.report.manoeuvre_predictions: the replay the metrics compare starts where the manoeuvre
     does (from the measured state there), not at the start of the approach; a record taken whole keeps its
     whole-record replay."""
     from types import SimpleNamespace
 
-    from study.doctor.diagnose import manoeuvre_predictions
+    from study.doctor.report import manoeuvre_predictions
     from study.maneuver_metrics import manoeuvre_start
 
     v = load_vessel(VESSEL)

@@ -19,7 +19,8 @@ import pandas as pd
 import pytest
 
 from study import facility as fac
-from study.doctor.diagnose import Doctor, Options, without_effects
+from study.doctor.diagnose import Doctor, Options
+from study.doctor.model_error import without_effects
 from study.schema import Record, SchemaError, read_record, write_record
 
 from test_doctor import KNOWN, U0, VESSEL, records

@@ -8,7 +8,8 @@ import re
 
 import pytest
 
-from study.doctor.diagnose import Doctor, Options, write_report
+from study.doctor.diagnose import Doctor, Options
+from study.doctor.report import write_report
 from study.doctor.html import render_html
 from study.schema import Record, read_record, write_record
 
@@ -92,7 +93,7 @@ def test_a_candidate_that_lowers_the_nrmse_but_worsens_the_metrics_says_so(writt
     import copy
 
     import study.maneuver_metrics as mmod
-    from study.doctor.diagnose import candidate_metrics, manoeuvre_predictions, predictions
+    from study.doctor.report import candidate_metrics, manoeuvre_predictions, predictions
 
     _, _, rep, d = written
     rep = copy.deepcopy(rep)

@@ -16,7 +16,8 @@ import pytest
 
 from doctor_cases import MMG_HULL, VESSEL, make_records, perturbed_prior
 from study.doctor import model_error as me
-from study.doctor.diagnose import Doctor, Options, write_report
+from study.doctor.diagnose import Doctor, Options
+from study.doctor.report import write_report
 
 
 @pytest.fixture(scope="module")

@@ -43,10 +43,7 @@ from .. import facility as fac
 from ..identify.effects import list_effects, registry
 from ..identify.with_effects import (CHANNELS, UNITS, EffectsProblem, Fit, diverged_records, record_error,
                                    record_errors, validation_error)
-from .model_error import without_effects  # noqa: F401 -- also the doctor's API
-from .report import (CONVENTIONS, DEFINITIONS, candidate_metrics, catalogue_rows, git_revision,  # noqa: F401
-                     manoeuvre_predictions, predictions, provenance, record_sha256, worst_windows,
-                     write_report)  # the report's writing, importable from here as before
+from .model_error import without_effects
 
 #: the consistency test needs this many validation records (a paired t-test on fewer has no power)
 MIN_RECORDS_FOR_TEST = 3
@@ -370,26 +367,11 @@ class Doctor:
         scored = [r for r in base.errors if r not in base.diverged]
         ladder = [self._ladder_row("baseline", base, scored)]
         ladder_fits = [base.fit]
-        notes = list(self.check_messages) + self.excitation_notes()
-        n_val = len(scored)
-        if n_val < MIN_RECORDS_FOR_TEST:
-            notes.append(f"only {n_val} validation record(s) to compare on: the consistency test (a paired t-test "
-                         f"of the per-record errors, which needs at least {MIN_RECORDS_FOR_TEST}) was not run, so a "
-                         f"verdict rests on the mean error alone; give at least {MIN_RECORDS_FOR_TEST} validation "
-                         f"records (or {MIN_RECORDS_FOR_TEST} training records, each held out in turn) to settle it")
+        notes = self._opening_notes(base, scored)
         first_ranking, missing, ambiguous, stab, first_evs = None, None, [], [], {}
         diverged = {"baseline": base.diverged}
         current = base  # the ladder's step as reported (outer parameters refined on the replay error)
         ranking_base = base if not self.given else self.evaluate(tuple(self.given))  # its equation-error twin
-        if base.diverged:
-            notes.insert(0, f"the baseline model DIVERGES when replayed through {len(base.diverged)} of "
-                         f"{len(base.errors)} validation record(s) ({', '.join(base.diverged)}): "
-                         + (f"those records have no error and are not scored; candidates are compared on the other "
-                            f"{n_val}" if scored else "no record is left to compare on, so no missing effect is "
-                            "named") +
-                         ". Check the model's stability (an identified hull extrapolating beyond its training "
-                         "manoeuvres), validate within the range it was identified on, or add training records "
-                         "that cover the validation manoeuvres")
         for step in range(self.opt.max_steps):
             # candidates are fitted by equation error: compared with the equation-error fit of the same step
             ranking, evs = self.rank(ranking_base, scored)
@@ -421,11 +403,7 @@ class Doctor:
             e_prev, e_new = _mean_on(current, scored), _mean_on(cand, scored)
             # the step as refined must pass the ranking's own bar: lower, by at least min_improvement
             if not e_new <= e_prev * (1.0 - self.opt.min_improvement):
-                why = (f"diverges on {', '.join(r for r in cand.diverged if r in scored)}" if not np.isfinite(e_new)
-                       else f"its validation error {e_new:.3g} is not below the previous step's {e_prev:.3g}"
-                       if e_new >= e_prev else
-                       f"its validation error falls only {100 * (1 - e_new / e_prev):.0f} % ({e_prev:.3g} -> "
-                       f"{e_new:.3g}), less than the {100 * self.opt.min_improvement:.0f} % a candidate needs")
+                why = self._why_rejected(cand, scored, e_prev, e_new)
                 ladder.append(self._ladder_row(f"+ {m}", cand, scored, rejected=True, reason=why))
                 notes.append(f"ladder step + {m} rejected: with its parameters refined on the training replays it "
                              f"{why}; the ladder stops at the step before")
@@ -456,6 +434,36 @@ class Doctor:
                        "diverged": diverged, "scored": scored, "ladder_fits": ladder_fits,
                        "seconds": time.perf_counter() - t0}
         return self.result
+
+    def _opening_notes(self, base, scored: list) -> list:
+        """The report's notes known before any candidate is fitted: the input checks, the excitation, too few
+        records for the consistency test, a diverged baseline."""
+        notes = list(self.check_messages) + self.excitation_notes()
+        n_val = len(scored)
+        if n_val < MIN_RECORDS_FOR_TEST:
+            notes.append(f"only {n_val} validation record(s) to compare on: the consistency test (a paired t-test "
+                         f"of the per-record errors, which needs at least {MIN_RECORDS_FOR_TEST}) was not run, so a "
+                         f"verdict rests on the mean error alone; give at least {MIN_RECORDS_FOR_TEST} validation "
+                         f"records (or {MIN_RECORDS_FOR_TEST} training records, each held out in turn) to settle it")
+        if base.diverged:
+            notes.insert(0, f"the baseline model DIVERGES when replayed through {len(base.diverged)} of "
+                         f"{len(base.errors)} validation record(s) ({', '.join(base.diverged)}): "
+                         + (f"those records have no error and are not scored; candidates are compared on the other "
+                            f"{n_val}" if scored else "no record is left to compare on, so no missing effect is "
+                            "named") +
+                         ". Check the model's stability (an identified hull extrapolating beyond its training "
+                         "manoeuvres), validate within the range it was identified on, or add training records "
+                         "that cover the validation manoeuvres")
+        return notes
+
+    def _why_rejected(self, cand, scored: list, e_prev: float, e_new: float) -> str:
+        """Why a ladder step, refined, fails the ranking's bar (diverged, not lower, or not lower by enough)."""
+        if not np.isfinite(e_new):
+            return f"diverges on {', '.join(r for r in cand.diverged if r in scored)}"
+        if e_new >= e_prev:
+            return f"its validation error {e_new:.3g} is not below the previous step's {e_prev:.3g}"
+        return (f"its validation error falls only {100 * (1 - e_new / e_prev):.0f} % ({e_prev:.3g} -> "
+                f"{e_new:.3g}), less than the {100 * self.opt.min_improvement:.0f} % a candidate needs")
 
     def rudder_residual(self, base, final) -> dict:
         """The residual yaw moment and sway force per rudder-angle bin of the baseline's and the final model's fit

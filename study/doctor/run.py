@@ -152,7 +152,8 @@ def run(conf: dict) -> dict:
     """Run the doctor from a resolved config (what the CLI and the tests call)."""
     from ..settings import check_diagnose
     from ..sim.effects import ShallowWater, apply_effects
-    from .diagnose import Doctor, Options, write_report
+    from .diagnose import Doctor, Options
+    from .report import write_report
 
     out = check_diagnose(conf)  # before any work: records and out given, no report there, thresholds in range
     _check_place(conf)

@@ -111,3 +111,22 @@ def test_a_candidate_that_lowers_the_nrmse_but_worsens_the_metrics_says_so(writt
     r = rep["ranking"][0]
     assert r["metrics_worse"] and r["metrics"]["error"] == pytest.approx(0.2)
     assert "lowers the NRMSE but worsens the manoeuvre metrics (mean relative error 5.0 % -> 20.0 %" in r["note"]
+
+
+def test_the_metrics_measured_against_their_intervals_are_a_figure_of_the_report(written):
+    tmp, _, rep, _ = written
+    listed = {f["file"]: f for f in rep["figures"]}
+    assert listed["metric_intervals.png"]["section"] == "intervals"
+    assert (tmp / "report" / "figures" / "metric_intervals.png").read_bytes().startswith(b"\x89PNG")
+    assert "Manoeuvre metrics and their intervals" in (tmp / "report" / "report.html").read_text()
+
+
+def test_the_interval_figure_needs_a_measured_value_and_an_interval():
+    from study.doctor import plots
+
+    row = {"record": "turn", "metric": "tactical_diameter_L", "measured": 3.1, "final": 3.3, "final_low": 3.0,
+           "final_high": 3.6}
+    assert plots.metric_intervals([row]).startswith(b"\x89PNG")
+    assert plots.metric_intervals([{**row, "final_low": float("nan")}]) is None
+    assert plots.metric_intervals([{**row, "metric": "steady_turning_rate"}]) is None
+    assert plots.metric_intervals([]) is None

@@ -184,6 +184,7 @@ def main(argv=None) -> int:
              "CC BY-NC-SA 4.0: the `esso_osaka/` figures are derived from them and carry that licence. KVLCC2: "
              "HSVA free-running tests, SIMMAN 2008 (Stern et al. 2011). The data are read in place from "
              "`../shared/data/real`, never copied here.", ""]
+    summaries = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name in names:
             fn = EXAMPLES[name]
@@ -191,13 +192,17 @@ def main(argv=None) -> int:
             try:
                 rep = fn(Path(tmp), **kw) if name == "simulated_current" else fn(**kw)
             except FileNotFoundError as e:  # an example whose data are missing is listed, not run
-                lines += [f"### {name}", "", f"not run: {e}", ""]
+                summaries[name] = [f"### {name}", "", f"not run: {e}", ""]
                 continue
             print(f"{name}: {rep['verdict']}")
-            lines += _summary(name, rep)
+            summaries[name] = _summary(name, rep)
             (out / name / "summary.json").write_text(json.dumps({"verdict": rep["verdict"], "ladder": rep["ladder"],
                                                                   "missing_effect": rep["missing_effect"]},
                                                                  indent=1, default=float))
+    for name in EXAMPLES:  # with --only, the examples not rebuilt keep their summary (from their report)
+        if name not in summaries and (out / name / "report.json").is_file():
+            summaries[name] = _summary(name, json.loads((out / name / "report.json").read_text(encoding="utf-8")))
+    lines += [line for name in EXAMPLES if name in summaries for line in summaries[name]]
     (out / "README.md").write_text("\n".join(lines) + "\n", encoding="utf-8")
     print(f"examples in {out.resolve()}")
     return 0

@@ -19,8 +19,8 @@ NA = "n/a"
 DIVERGED = "diverged"
 
 #: figure sections in display order, with their headings; any other section follows, in order of appearance
-SECTIONS: dict[str, str] = {"compare": "Model against measurements", "residuals": "Residuals",
-                            "growth": "Error growth", "ladder": "Error ladder"}
+SECTIONS: dict[str, str] = {"compare": "Model against measurements", "intervals": "Manoeuvre metrics and their intervals",
+                            "residuals": "Residuals", "growth": "Error growth", "ladder": "Error ladder"}
 MODES = {"given": "validation records given by the user", "held_out": "validation records held out by the doctor"}
 #: the sections' titles (the table of contents shows the same)
 TITLES = {"ladder": "Error ladder", "candidates": "Candidate effects", "errors": "Errors per record and channel",

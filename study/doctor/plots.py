@@ -6,7 +6,9 @@
   the states and inputs -- where a missing effect leaves its signature (a current: residuals that follow the
   heading; a yaw bias: a constant offset; a missing nonlinear term: a curve against v or r);
 - ``growth``: how the error of each validation record grows along it, the worst windows shaded;
-- ``ladder``: the validation error of each step of the ladder, a rejected step hatched, a diverged one marked.
+- ``ladder``: the validation error of each step of the ladder, a rejected step hatched, a diverged one marked;
+- ``metric_intervals``: the manoeuvre metrics of the validation records, measured against predicted with 90 %
+  intervals.
 
 Made to be read at the report's full width (about 900 px on screen, A4 in print): about 9.5 in wide at
 110 dpi, 10 pt text, a unit on every axis (angles and the yaw rate in degrees, said on the axis), one legend per
@@ -320,4 +322,63 @@ def ladder(steps: list) -> bytes:
     if not steps:
         _warn_box(ax, "no ladder step")
     fig.suptitle("Error ladder: the model, then each effect added in turn")
+    return _png(fig)
+
+
+#: the manoeuvre metrics the interval figure draws, in this order (the ``*_L`` rows rather than metres), and
+#: their axis labels
+INTERVAL_METRICS = {"tactical_diameter_L": "tactical diameter [L]", "advance_L": "advance [L]",
+                    "transfer_L": "transfer [L]", "first_overshoot": "first overshoot [deg]",
+                    "second_overshoot": "second overshoot [deg]", "period": "period [s]"}
+
+
+def metric_intervals(rows: list) -> bytes | None:
+    """Per manoeuvre metric (:data:`INTERVAL_METRICS`), each validation record's measured value (black) against
+    the final model's prediction with its 90 % interval (blue) and the baseline's (red, open); each panel's title
+    counts the measured values inside the final model's intervals. None when no row has a measured value and an
+    interval."""
+    from matplotlib.lines import Line2D
+
+    def ok(row, *keys):
+        return all(math.isfinite(_f(row.get(k))) for k in keys)
+
+    def bar(ax, x, v, lo, hi, **kw):
+        ax.errorbar(x, v, yerr=[np.maximum(v - lo, 0.0), np.maximum(hi - v, 0.0)], capsize=3, ms=5, ls="", **kw)
+
+    panels = [(label, [r for r in rows if r.get("metric") == m and ok(r, "measured", "final", "final_low",
+                                                                       "final_high")])
+              for m, label in INTERVAL_METRICS.items()]
+    panels = [p for p in panels if p[1]]
+    if not panels:
+        return None
+    plt = _plt()
+    n_rec = max(len(sel) for _, sel in panels)
+    fig, axes = plt.subplots(len(panels), 1, figsize=(min(WIDTH, max(6.0, 0.55 * n_rec + 3.0)),
+                                                      2.3 * len(panels) + 0.9), layout="constrained",
+                             squeeze=False)
+    baseline_drawn = False
+    for ax, (label, sel) in zip(axes[:, 0], panels):
+        x = np.arange(len(sel))
+        col = {k: np.array([_f(r.get(k)) for r in sel]) for k in ("measured", "final", "final_low", "final_high",
+                                                                    "baseline", "baseline_low", "baseline_high")}
+        if all(ok(r, "baseline", "baseline_low", "baseline_high") for r in sel):
+            baseline_drawn = True
+            bar(ax, x - 0.2, col["baseline"], col["baseline_low"], col["baseline_high"], fmt="o", mfc="white",
+                color=C_BASE, lw=1.0)
+        bar(ax, x + 0.2, col["final"], col["final_low"], col["final_high"], fmt="s", color=C_FINAL, lw=1.2)
+        ax.plot(x, col["measured"], "o", color=C_MEAS, ms=6)
+        inside = int(np.sum((col["measured"] >= col["final_low"]) & (col["measured"] <= col["final_high"])))
+        ax.set_title(f"{label}: {inside} of {len(sel)} measured inside the final model's 90 % interval")
+        tilt = len(sel) > 4
+        ax.set_xticks(x, [str(r["record"]) for r in sel], rotation=30 if tilt else 0,
+                      ha="right" if tilt else "center", fontsize=8)
+        ax.set_xlim(-0.6, len(sel) - 0.4)
+        ax.ticklabel_format(axis="y", useOffset=False)
+        ax.set_ylabel(label.split(" [")[-1].rstrip("]") if "[" in label else "")
+    handles = [Line2D([], [], marker="o", color=C_MEAS, ls="", label="measured"),
+               Line2D([], [], marker="s", color=C_FINAL, label="final model, 90 % interval")]
+    if baseline_drawn:
+        handles.append(Line2D([], [], marker="o", mfc="white", color=C_BASE, label="baseline, 90 % interval"))
+    fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), frameon=False)
+    fig.suptitle("Manoeuvre metrics: measured against predicted, with 90 % intervals")
     return _png(fig)

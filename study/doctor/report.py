@@ -141,6 +141,7 @@ def write_report(doctor, out_dir, vessel: str, model: str, overwrite: bool = Fal
         dict(zip(doctor.train_names, doctor.train_df))
     figs, listing, windows = _figures(doctor, rep, meas, pb, pf)
     mm, uncertainty = _manoeuvres(doctor, rep, meas, pb, pf)
+    _interval_figure(mm, figs, listing)
     _put_figures(out, figs)
     html_report = {**_jsonable(rep), "title": f"Model doctor: {model} on {vessel}", "created_by":
                    "python -m study.diagnose", "vessel": vessel, "model": model,
@@ -224,6 +225,23 @@ def _manoeuvres(doctor, rep: dict, meas: dict, pb: dict, pf: dict) -> tuple:
     candidate_metrics(doctor, rep, meas, mb)
     uncertainty = annotate(doctor, mm, base, final, mb, mf)  # intervals, extrapolation, carriers; predicted turns
     return mm, uncertainty
+
+
+def _interval_figure(mm: list, figs: dict, listing: list) -> None:
+    """Add the figure of the manoeuvre metrics measured against predicted with their 90 % intervals, when any
+    validation record has such a metric."""
+    from . import plots
+
+    data = plots.metric_intervals(mm)
+    if data is None:
+        return
+    figs["metric_intervals.png"] = data
+    listing.append({"file": "metric_intervals.png", "title": "Manoeuvre metrics against their 90 % intervals",
+                    "caption": "Each validation record's measured metric (black) against the final model's "
+                               "prediction (blue) and the baseline's (red, open), each with its 90 % interval "
+                               "(identification spread, the models that fit as well, and the extrapolation error; "
+                               "see the section on how far the predictions can be trusted).",
+                    "section": "intervals"})
 
 
 def _put_figures(out, figs: dict) -> None:

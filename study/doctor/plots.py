@@ -369,8 +369,9 @@ def metric_intervals(rows: list) -> bytes | None:
         ax.plot(x, col["measured"], "o", color=C_MEAS, ms=6)
         inside = int(np.sum((col["measured"] >= col["final_low"]) & (col["measured"] <= col["final_high"])))
         ax.set_title(f"{label}: {inside} of {len(sel)} measured inside the final model's 90 % interval")
-        tilt = len(sel) > 4
-        ax.set_xticks(x, [str(r["record"]) for r in sel], rotation=30 if tilt else 0,
+        names = [str(r["record"]) for r in sel]
+        tilt = len(sel) * max(len(n) for n in names) > 60  # record names that would overlap side by side
+        ax.set_xticks(x, names, rotation=30 if tilt else 0,
                       ha="right" if tilt else "center", fontsize=8)
         ax.set_xlim(-0.6, len(sel) - 0.4)
         ax.ticklabel_format(axis="y", useOffset=False)

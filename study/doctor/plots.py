@@ -7,8 +7,8 @@
   heading; a yaw bias: a constant offset; a missing nonlinear term: a curve against v or r);
 - ``growth``: how the error of each validation record grows along it, the worst windows shaded;
 - ``ladder``: the validation error of each step of the ladder, a rejected step hatched, a diverged one marked;
-- ``metric_intervals``: the manoeuvre metrics of the validation records, measured against predicted with 90 %
-  intervals.
+- ``metric_intervals``: the turning circles' and zigzags' metrics of the validation records, measured against
+  predicted with 90 % intervals.
 
 Made to be read at the report's full width (about 900 px on screen, A4 in print): about 9.5 in wide at
 110 dpi, 10 pt text, a unit on every axis (angles and the yaw rate in degrees, said on the axis), one legend per
@@ -326,10 +326,10 @@ def ladder(steps: list) -> bytes:
 
 
 #: the manoeuvre metrics the interval figure draws, in this order (the ``*_L`` rows rather than metres), and
-#: their axis labels
+#: their axis labels. Not the zigzag's period: a replay takes the record's rudder, whose switches set it.
 INTERVAL_METRICS = {"tactical_diameter_L": "tactical diameter [L]", "advance_L": "advance [L]",
                     "transfer_L": "transfer [L]", "first_overshoot": "first overshoot [deg]",
-                    "second_overshoot": "second overshoot [deg]", "period": "period [s]"}
+                    "second_overshoot": "second overshoot [deg]"}
 
 
 def metric_intervals(rows: list) -> bytes | None:

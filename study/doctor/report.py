@@ -237,10 +237,10 @@ def _interval_figure(mm: list, figs: dict, listing: list) -> None:
         return
     figs["metric_intervals.png"] = data
     listing.append({"file": "metric_intervals.png", "title": "Manoeuvre metrics against their 90 % intervals",
-                    "caption": "Each validation record's measured metric (black) against the final model's "
-                               "prediction (blue) and the baseline's (red, open), each with its 90 % interval "
-                               "(identification spread, the models that fit as well, and the extrapolation error; "
-                               "see the section on how far the predictions can be trusted).",
+                    "caption": "Each validation record's measured turning-circle and zigzag metrics (black) "
+                               "against the final model's prediction (blue) and the baseline's (red, open), each "
+                               "with its 90 % interval (identification spread, the models that fit as well, and the "
+                               "extrapolation error; see the section on how far the predictions can be trusted).",
                     "section": "intervals"})
 
 

@@ -34,52 +34,14 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
-from scipy import stats
 
 from .. import facility as fac
 from ..identify.effects import list_effects, registry
-from ..identify.with_effects import (CHANNELS, UNITS, EffectsProblem, Fit, diverged_records, record_error,
-                                   record_errors, validation_error)
+from ..identify.with_effects import CHANNELS, UNITS, EffectsProblem, Fit, record_errors, validation_error
+from .decision import MIN_RECORDS_FOR_TEST, Evaluation, Options, decide, mean_on
 from .model_error import without_effects
-
-#: the consistency test needs this many validation records (a paired t-test on fewer has no power)
-MIN_RECORDS_FOR_TEST = 3
-
-
-@dataclass
-class Options:
-    min_improvement: float = 0.10
-    alpha: float = 0.05
-    tie: float = 0.10
-    max_steps: int = 3
-    candidates: tuple | None = None  # None: every discovered effect
-    structure: str | dict | None = None  # None: Savitzky-Golay over 0.2 L/U0 (see EffectsProblem)
-    effect_path: tuple = ()  # extra folders of effect YAMLs (the user's own effects)
-    checks: str = "error"  # the record checks that need the vessel: error | warn | off
-    anchor: float | None = 0.3  # an identified model's coefficients anchored to the vessel config's, relative sd
-    # (their prior: published, captive tests, CFD); None or 0: plain least squares
-    keep_setup_effects: bool = False  # keep set-up effects in predictions for another facility or scale
-
-
-@dataclass
-class Evaluation:
-    effects: tuple
-    fit: object
-    errors: dict  # record -> channel -> {rmse, nrmse}, and 'diverged'
-    validation_error: float
-    training_error: float
-    seconds: float
-    fold_fits: list = field(default_factory=list)
-
-    @property
-    def diverged(self) -> list:
-        return diverged_records(self.errors)
-
-    def per_record(self, records=None) -> np.ndarray:
-        return np.array([record_error(self.errors[r]) for r in (records or list(self.errors))])
 
 
 def _names(records) -> list:
@@ -93,54 +55,6 @@ def _names(records) -> list:
             out[i] = f"{n}#{i}"
         seen[n] = i
     return out
-
-
-def _mean_on(ev: Evaluation, records: list) -> float:
-    return float(np.mean(ev.per_record(records))) if records else math.inf
-
-
-def compare(base: np.ndarray, cand: np.ndarray, opt: Options) -> dict:
-    """The decision rule for one candidate against its base, from per-record validation errors: improvement of
-    the mean, the paired test when there are enough records, significance. Diverged (inf) errors on either side
-    make no comparison."""
-    out = {"improvement": None, "p_value": None, "significant": False, "diverged": False}
-    if not (np.all(np.isfinite(base)) and np.all(np.isfinite(cand))):
-        out["diverged"] = bool(not np.all(np.isfinite(cand)))
-        return out
-    e0, e1 = float(np.mean(base)), float(np.mean(cand))
-    imp = (e0 - e1) / e0 if e0 > 0 else 0.0
-    ok = imp >= opt.min_improvement
-    p = None
-    if len(base) >= MIN_RECORDS_FOR_TEST:
-        d = np.log(base) - np.log(cand)
-        if np.allclose(d, d[0]):
-            p = 0.0 if d[0] > 0 else 1.0
-        else:
-            p = float(stats.ttest_1samp(d, 0.0, alternative="greater").pvalue)
-        ok = ok and p < opt.alpha
-    out.update(improvement=float(imp), p_value=p, significant=bool(ok))
-    return out
-
-
-def decide(base: Evaluation, cands: dict, opt: Options, records=None) -> tuple:
-    """(named effect or None, ambiguous pair or [], rows sorted best first) on the given validation records."""
-    records = list(records) if records is not None else list(base.errors)
-    if not records:  # nothing to score: the rows still show each candidate (every comparison void)
-        records = list(base.errors)
-    b = base.per_record(records)
-    rows = []
-    for name, ev in cands.items():
-        c = ev.per_record(records)
-        rows.append({"effect": name, "validation_error": float(np.mean(c)), **compare(b, c, opt)})
-    rows.sort(key=lambda d: (not np.isfinite(d["validation_error"]), d["validation_error"]))
-    if not np.all(np.isfinite(b)):
-        return None, [], rows
-    sig = [r for r in rows if r["significant"]]
-    if not sig:
-        return None, [], rows
-    if len(sig) > 1 and sig[1]["validation_error"] <= sig[0]["validation_error"] * (1 + opt.tie):
-        return None, [sig[0]["effect"], sig[1]["effect"]], rows
-    return sig[0]["effect"], [], rows
 
 
 class Doctor:
@@ -356,7 +270,7 @@ class Doctor:
         """A ladder step: the validation error over every record (inf when one diverged) and over the scored
         records (those where the baseline did not diverge: what steps are compared on)."""
         return {"step": step, "effects": list(ev.effects), "validation_error": ev.validation_error,
-                "scored_error": _mean_on(ev, scored), "scored_records": list(scored),
+                "scored_error": mean_on(ev, scored), "scored_records": list(scored),
                 "training_error": ev.training_error, "diverged": ev.diverged, **extra}
 
     def run(self) -> dict:
@@ -400,7 +314,7 @@ class Doctor:
                 break
             key = self.key(ranking_base.effects + (m,))
             cand = self.evaluate(key, start=ranking_base.fit.outer, refine=True)
-            e_prev, e_new = _mean_on(current, scored), _mean_on(cand, scored)
+            e_prev, e_new = mean_on(current, scored), mean_on(cand, scored)
             # the step as refined must pass the ranking's own bar: lower, by at least min_improvement
             if not e_new <= e_prev * (1.0 - self.opt.min_improvement):
                 why = self._why_rejected(cand, scored, e_prev, e_new)
@@ -509,22 +423,54 @@ class Doctor:
 
     # ------------------------------------------------------------------------------------------ report
     def report(self) -> dict:
+        """The diagnosis as the report's JSON holds it: the verdict, baseline, ranking, ladder, stability, final
+        model, identifiability, errors per record and channel, notes, set-up effects, facilities and depths."""
         r = self.result
         base, final = r["base"], r["final"]
-
-        def errs_rows():
-            rows = []
-            for rec in base.errors:
-                for c in CHANNELS + ("track",):
-                    b, f = base.errors[rec][c], final.errors[rec][c]
-                    rows.append({"record": rec, "channel": c, "unit": UNITS[c],
-                                 "baseline_rmse": b["rmse"], "final_rmse": f["rmse"],
-                                 "baseline_nrmse": b["nrmse"], "final_nrmse": f["nrmse"],
-                                 "baseline_diverged": bool(base.errors[rec].get("diverged")),
-                                 "final_diverged": bool(final.errors[rec].get("diverged"))})
-            return rows
-
         m = r["missing"]
+        params_units = self.problem.units(tuple(self.effects))
+        setup = self.setup_report(final)
+        notes = list(r["notes"]) + setup["notes"] + self.depth_notes()
+        implausible = [c for c in r["ranking"] if c.get("implausible")]
+        for c in implausible:
+            notes.append(f"candidate {c['effect']} rejected as physically implausible here: {c['implausible']}")
+        return {
+            "verdict": self._verdict(),
+            "baseline": {"validation_error": base.validation_error, "training_error": base.training_error,
+                         "effects": list(base.effects), "parameters": self.problem.describe(base.fit),
+                         "errors": base.errors, "diverged": base.diverged},
+            "ranking": [{k: v for k, v in c.items() if k != "seconds"} for c in r["ranking"]],
+            "not_applicable": self.not_applicable,
+            "missing_effect": m,
+            "ambiguous": r["ambiguous"],
+            "ladder": r["ladder"],
+            "stability": r["stability"],
+            "separating_maneuver": r.get("separating"),
+            "rudder_residual": self.rudder_residual(base, final),
+            "scored_records": r["scored"],
+            "diverged": r["diverged"],
+            "final": {"effects": list(final.effects), "validation_error": final.validation_error,
+                      "parameters": self.problem.describe(final.fit), "errors": final.errors,
+                      "diverged": final.diverged},
+            "units": params_units,
+            "identifiability": self.problem.identifiability(base.fit),
+            "errors_table": _errors_rows(base, final),
+            "notes": notes,
+            "setup_effects": {k: v for k, v in setup.items() if k != "notes"},
+            "facilities": {n: f for n, f in zip(self.train_names, self.train_facilities)} | (
+                {n: s[0] for n, s in zip(self.val_names, self.val_setups)} if self.mode == "given" else {}),
+            "mode": self.mode,
+            "train": self.train_names,
+            "validate": self.val_names if self.mode == "given" else [],
+            "depths_h_T": {i.name: i.h_T for i in self.problem.infos + self.val_infos},
+            "seconds": r["seconds"],
+        }
+
+    def _verdict(self) -> str:
+        """The report's one line: the missing effect with its fall of the error and its parameters, a tie, a
+        rejected best candidate or nothing significant; a diverged baseline said first."""
+        r = self.result
+        base, m = r["base"], r["missing"]
         stab = {s["step"]: s for s in r["stability"]}
         scored = r["scored"]
         prefix = ""
@@ -564,41 +510,18 @@ class Doctor:
             verdict = prefix + "No significant missing effect"
             if 1 in stab and stab[1]["k"] is not None:
                 verdict += f" (the same in {stab[1]['k']} of {stab[1]['n']} with one validation record left out)"
-        params_units = self.problem.units(tuple(self.effects))
-        setup = self.setup_report(final)
-        notes = list(r["notes"]) + setup["notes"] + self.depth_notes()
-        implausible = [c for c in r["ranking"] if c.get("implausible")]
-        for c in implausible:
-            notes.append(f"candidate {c['effect']} rejected as physically implausible here: {c['implausible']}")
-        return {
-            "verdict": verdict,
-            "baseline": {"validation_error": base.validation_error, "training_error": base.training_error,
-                         "effects": list(base.effects), "parameters": self.problem.describe(base.fit),
-                         "errors": base.errors, "diverged": base.diverged},
-            "ranking": [{k: v for k, v in c.items() if k != "seconds"} for c in r["ranking"]],
-            "not_applicable": self.not_applicable,
-            "missing_effect": m,
-            "ambiguous": r["ambiguous"],
-            "ladder": r["ladder"],
-            "stability": r["stability"],
-            "separating_maneuver": r.get("separating"),
-            "rudder_residual": self.rudder_residual(base, final),
-            "scored_records": r["scored"],
-            "diverged": r["diverged"],
-            "final": {"effects": list(final.effects), "validation_error": final.validation_error,
-                      "parameters": self.problem.describe(final.fit), "errors": final.errors,
-                      "diverged": final.diverged},
-            "units": params_units,
-            "identifiability": self.problem.identifiability(base.fit),
-            "errors_table": errs_rows(),
-            "notes": notes,
-            "setup_effects": {k: v for k, v in setup.items() if k != "notes"},
-            "facilities": {n: f for n, f in zip(self.train_names, self.train_facilities)} | (
-                {n: s[0] for n, s in zip(self.val_names, self.val_setups)} if self.mode == "given" else {}),
-            "mode": self.mode,
-            "train": self.train_names,
-            "validate": self.val_names if self.mode == "given" else [],
-            "depths_h_T": {i.name: i.h_T for i in self.problem.infos + self.val_infos},
-            "seconds": r["seconds"],
-        }
+        return verdict
 
+
+def _errors_rows(base: Evaluation, final: Evaluation) -> list:
+    """Per validation record and channel, the baseline's and the final model's RMSE and NRMSE."""
+    rows = []
+    for rec in base.errors:
+        for c in CHANNELS + ("track",):
+            b, f = base.errors[rec][c], final.errors[rec][c]
+            rows.append({"record": rec, "channel": c, "unit": UNITS[c],
+                         "baseline_rmse": b["rmse"], "final_rmse": f["rmse"],
+                         "baseline_nrmse": b["nrmse"], "final_nrmse": f["nrmse"],
+                         "baseline_diverged": bool(base.errors[rec].get("diverged")),
+                         "final_diverged": bool(final.errors[rec].get("diverged"))})
+    return rows

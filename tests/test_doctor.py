@@ -172,6 +172,30 @@ def test_two_candidates_within_the_tie_are_reported_as_indistinguishable(monkeyp
     assert len(rep["ladder"]) == 1
 
 
+@pytest.mark.parametrize("share, partly", [(0.7, True), (0.3, False)])
+def test_an_effect_that_removes_less_than_half_of_the_error_is_said_to_explain_it_in_part(monkeypatch, share,
+                                                                                          partly):
+    """A named effect that lowers the validation error by 30 % may stand in for a cause no candidate models (a
+    larger added mass passes for a rudder-hull interaction): the verdict says so; at 70 % it does not."""
+    train, val = records([], duration=60.0)
+    d = Doctor(VESSEL, KNOWN, train, val, Options(candidates=("current", "yaw_bias"), checks="off"))
+    real = Doctor.evaluate
+
+    def fake_evaluate(self, effects, start=None, fixed=(), refine=False):
+        ev = real(self, (), start, fixed, False)
+        if not effects:
+            return ev
+        out = scaled(ev, effects, share if effects[-1] == "current" else 0.97)
+        self.evaluations[(self.key(effects), bool(fixed), refine)] = out  # the ladder reads its steps back
+        return out
+
+    monkeypatch.setattr(Doctor, "evaluate", fake_evaluate)
+    d.run()
+    rep = d.report()
+    assert rep["missing_effect"] == "current"
+    assert ("may stand in for a cause no candidate models" in rep["verdict"]) is partly, rep["verdict"]
+
+
 def test_bad_input_is_a_clear_error(tmp_path):
     bad = tmp_path / "bad.csv"
     bad.write_text("time,u,v\n0,1,0\n0.1,1,0\n")

@@ -14,7 +14,8 @@
 4. **Verdict**: the best significant candidate is the missing effect, unless the next significant one is within
    ``tie`` (default 10 %) of its validation error: then the data cannot tell them apart, and the report says so
    (``missing_effect`` null, ``ambiguous`` the pair). Each verdict is repeated with each validation record left
-   out and reported as "named in k of n".
+   out and reported as "named in k of n"; a named effect that removes less than half of the validation error
+   (``decision.EXPLAINS_MOST``) is said to explain it in part: it may stand in for a cause no candidate models.
 5. **Ladder**: the missing effect is added (its parameters refined on the training replays), the remaining
    candidates ranked again on top of it, and so on while a significant one remains. A step whose validation
    error, refined, is not at least ``min_improvement`` lower than the step before is rejected: the ladder stops
@@ -40,7 +41,7 @@ import numpy as np
 from .. import facility as fac
 from ..identify.effects import list_effects, registry
 from ..identify.with_effects import CHANNELS, UNITS, EffectsProblem, Fit, record_errors, validation_error
-from .decision import MIN_RECORDS_FOR_TEST, Evaluation, Options, decide, mean_on
+from .decision import EXPLAINS_MOST, MIN_RECORDS_FOR_TEST, Evaluation, Options, decide, mean_on
 from .model_error import without_effects
 
 
@@ -496,6 +497,9 @@ class Doctor:
                             f"; with it the replay of {', '.join(base.diverged)} is stable")
             if 1 in stab and stab[1]["k"] is not None:
                 verdict += f"; named in {stab[1]['k']} of {stab[1]['n']} with one validation record left out"
+            if e1 > (1.0 - EXPLAINS_MOST) * e0:
+                verdict += (f"; it removes less than {100 * EXPLAINS_MOST:.0f} % of the error: it may stand in for a "
+                            "cause no candidate models")
             acc = [s for s in r["ladder"][2:] if not s.get("rejected")]
             if acc:
                 verdict += "; then " + ", ".join(s["step"][2:] for s in acc)

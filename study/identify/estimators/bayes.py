@@ -1,22 +1,12 @@
 """Posterior sampling with emcee (Foreman-Mackey et al. 2013, PASP 125, 306), the affine-invariant ensemble sampler
 (Goodman & Weare 2010), every step's whole ensemble evaluated in one vectorised call.
 
-Likelihoods (``likelihood``; the output-error one whenever the structure simulates):
-
-- **regression** (the default for regression structures): the rows' noise as the sample structure makes it
-  (``study.identify.row_noise``), the coefficients' posterior the sandwich posterior (Mueller 2013) of the
-  whitened rows; with ``correct_rows`` the structure's truncation and the regressors' noise are removed first
-  (``study.identify.row_errors``). Gaussian: sampled with an independence proposal from its closed form.
-- **regression_iid**: independent rows, sigma inferred; right for white residuals only (kept so that the studies
-  can show the difference).
-- **output error** (``output_error`` structure): a noise scale per output channel, the model simulated through
-  the records (all walkers in one batch simulation).
-
-Priors: regression coefficients independent normal N(0, (prior_scale sd(y) / rms(X_j))^2); output-error parameters
-uniform in the search box; noise scales Jeffreys on [1e-8, 10] x the target's spread. Run length: chunks of
-``check_every`` steps until the ESS reaches ``target_ess`` and the chain exceeds ``min_tau_multiple`` x tau, with a
-floor of ``min_steps`` (emcee's tau is biased low on short chains). The derivations, the measured calibration and
-the reasons for each default are in ``docs/concepts/emcee.md``.
+Likelihoods (``likelihood``; output error whenever the structure simulates): **regression** (default), the
+sandwich posterior (Mueller 2013) of the rows whitened for the noise the sample structure makes
+(``study.identify.row_noise``), the structure's truncation and the regressors' noise removed first (``correct_rows``,
+``study.identify.row_errors``); **regression_iid**, independent rows (right for white residuals only); **output
+error**, a noise scale per output channel. Priors, run length, moves and defaults, with their sources:
+``docs/concepts/emcee.md``.
 """
 from __future__ import annotations
 
@@ -41,11 +31,10 @@ class EmceeSampler(Estimator):
     target_ess : int
         Effective samples wanted (of the slowest-mixing parameter).
     max_steps, check_every, min_steps : int
-        Step budget, the chunk after which the stopping rule is checked, and a minimum. ``check_every``,
-        ``min_steps`` None (the default): :attr:`RUN_LENGTH`, 250 and 500, or 50 and 200 for the regression
-        likelihoods' closed-form proposal (see the module docstring).
+        Step budget, the chunk after which the stopping rule is checked, and a floor (emcee's estimate of tau is
+        biased low on short chains). ``check_every``, ``min_steps`` None (the default): :attr:`RUN_LENGTH`.
     prior_scale : float
-        Width of the regression coefficients' normal prior (see the module docstring).
+        Width of the regression coefficients' default prior N(0, (prior_scale sd(y) / rms(X_j))^2).
     interval : float
         Central credible interval reported (0.9: 5 % and 95 % quantiles).
     seed : int
@@ -54,22 +43,21 @@ class EmceeSampler(Estimator):
     min_tau_multiple : float
         The chain must be longer than this many autocorrelation times (emcee's guidance: 50).
     moves : str
-        'de': emcee's differential-evolution moves (DEMove 0.8, :class:`SnookerMove` 0.2: emcee's
-        ``DESnookerMove`` corrected; ter Braak & Vrugt 2008). 'stretch': Goodman & Weare (emcee's default).
-        'laplace': an independence proposal from the closed-form posterior (regression) or a refitted multivariate
-        t (``LaplaceProposal``, output error) most of the steps, the DE moves the rest. 'auto': 'laplace' where a
-        Gaussian approximation exists, else 'de'. Shares and measurements: ``docs/concepts/emcee.md``.
+        'de' (DEMove 0.8, :class:`SnookerMove` 0.2; ter Braak & Vrugt 2008), 'stretch' (Goodman & Weare 2010,
+        emcee's default), 'laplace' (an independence proposal most of the steps, the DE moves the rest) or 'auto'
+        ('laplace' where a Gaussian approximation of the posterior exists, else 'de').
+    init : str
+        Output error: 'local' (a Gauss-Newton fit from the problem's initial estimate), 'de' (differential
+        evolution over the box first: a KT model's likelihood has distant local optima) or 'auto' (DE for up to 10
+        parameters, else local).
+    prior : dict or None
+        ``{source, sd, offset}``: an informative prior (``study.identify.priors``), resolved for :meth:`fit`.
     likelihood : str
         Regression structures: 'regression' (the rows' noise modelled with the structure's operators; default) or
-        'regression_iid' (independent rows); see the module docstring. Output error ignores it.
-    init : str
-        Output error: where the walkers start. 'local' a Gauss-Newton fit from the problem's initial estimate;
-        'de' differential evolution over the box first (global: a KT model's likelihood has distant local
-        optima); 'auto' DE for up to 10 parameters, else local.
+        'regression_iid' (independent rows). Output error ignores it.
     correct_rows : bool
-        'regression' likelihood: remove the rows' errors that are no white noise of the target, estimated from
-        the run's own records (``study.identify.row_errors``): the structure's truncation and the regressors'
-        noise (corrected least squares). ``study.identify.fit`` passes them as ``row_errors``.
+        'regression' likelihood: remove the structure's truncation and the regressors' noise from the rows first,
+        estimated from the run's own records (``study.identify.row_errors``, passed by ``study.identify.fit``).
     n_probes : int
         Noisy copies of the records the regressors' noise is measured with (``row_errors.N_PROBES``).
     """
@@ -103,12 +91,9 @@ class EmceeSampler(Estimator):
         w = self.n_walkers or max(32, 2 * ndim)
         return int(w + w % 2)
 
-    #: the run-length defaults when ``min_steps`` / ``check_every`` are None: (min_steps, check_every) for chains
-    #: whose autocorrelation is tens of steps (DE, stretch, the output error's adapted proposal), and for the
-    #: regression chains whose main move draws from the posterior in closed form (tau about 1.2: see the class doc)
+    #: (min_steps, check_every) when None: chains that mix over tens of steps, chains drawing from a closed form
     RUN_LENGTH = {"mixing": (500, 250), "closed_form": (200, 50)}
-    #: the share of DE moves next to an independence proposal: the output error's adapted proposal, the regression
-    #: posterior's closed form
+    #: the share of DE moves next to an independence proposal: the output error's adapted one, the closed form
     DE_SHARE = {"adapted": 0.2, "closed_form": 0.1}
 
     def _run_length(self, closed_form: bool) -> tuple[int, int]:
@@ -118,10 +103,10 @@ class EmceeSampler(Estimator):
                 int(dflt[1] if self.check_every is None else self.check_every))
 
     def _sample(self, log_prob, p0: np.ndarray, names: list, progress: bool, laplace=None, adapt: bool = True):
-        """``laplace``: an independence proposal for ``moves`` 'laplace'/'auto': a :class:`LaplaceProposal` (the
-        output error's Laplace approximation cut by the prior box, refitted to the draws: ``adapt``) or, for the
-        regression likelihoods, the posterior in closed form (:class:`LaplaceProposal` with ``df=inf``,
-        :class:`IidRegressionProposal`; fixed, ``adapt`` False)."""
+        """Run the chain to the stopping rule or the step budget; keep its draws, diagnostics and saved chain.
+        ``laplace``: the independence proposal of ``moves`` 'laplace'/'auto', a :class:`LaplaceProposal` refitted
+        to the draws (output error, ``adapt``) or the posterior in closed form (regression, fixed). One function:
+        the moves, the chunked run with its refits and stopping rule, and the summary share the run's state."""
         nw, ndim = p0.shape
         rng = np.random.default_rng(self.seed)
         kind = self.moves
@@ -147,8 +132,7 @@ class EmceeSampler(Estimator):
         state = p0
         steps, tau, ess, converged = 0, np.full(ndim, np.nan), 0.0, False
         last_adapt = 0  # 'laplace': the step of the proposal's last refit (the burn-in is at least this long)
-        # 'laplace' refits after a and 2a steps, a = check_every, but never past half the step budget: a short run
-        # (max_steps <= 2 check_every) would otherwise burn in its whole chain
+        # refits after a and 2a steps, a = check_every, within half the budget (else a short run is all burn-in)
         a = max(1, min(check_every, self.max_steps // 4))
         adapt_at = [a, 2 * a] if kind == "laplace" and adapt else []
         bar = None
@@ -163,10 +147,8 @@ class EmceeSampler(Estimator):
                 state = sampler.run_mcmc(state, n, progress=False)
                 steps += n
                 if steps in adapt_at:
-                    # adapt twice, then freeze: the proposal refitted to the walkers' draws since the last
-                    # adaptation (second half), which see what the Laplace approximation does not (the prior box,
-                    # skew); the chain up to the last adaptation is burn-in, so the kept chain is an ordinary
-                    # Metropolis-Hastings chain with a fixed proposal
+                    # refit to the draws past half the chain and the last refit (they see the prior box and skew);
+                    # the chain up to the last refit is burn-in: the kept chain has a fixed proposal
                     laplace.refit(sampler.get_chain(discard=max(steps // 2, last_adapt)).reshape(-1, ndim))
                     last_adapt = steps
                 if bar is not None:
@@ -261,11 +243,10 @@ class EmceeSampler(Estimator):
         return self.likelihood == "regression" and bool(self.correct_rows)
 
     def gaussian_regression(self, X, y, noise_operators=None, q_raw=None, prior_sd=None, errors=None):
-        """(mean, covariance, diagnostics, noise model or None) of the coefficients' posterior under the
-        'regression' likelihood and the default prior: what :meth:`fit` samples, in closed form (the calibration
-        study uses it on many datasets and checks the sampler against it on a few). ``q_raw``, ``prior_sd``: a
-        noise mix and prior widths taken as given (the same likelihood on other rows, e.g. noise-free ones);
-        ``errors``: the rows' errors to remove (``study.identify.row_errors.RowErrors``; with the operators only)."""
+        """(mean, covariance, diagnostics, noise model or None) of the coefficients' posterior under the 'regression'
+        likelihood and the default prior: what :meth:`fit` samples, in closed form. ``q_raw``, ``prior_sd``: a noise
+        mix and prior widths taken as given (the same likelihood on other rows, e.g. noise-free ones); ``errors``:
+        the rows' errors to remove (``study.identify.row_errors.RowErrors``; with the operators only)."""
         from .prior import gaussian_posterior, gls_posterior
 
         X, y, _ = as_arrays(X, y)
@@ -299,8 +280,7 @@ class EmceeSampler(Estimator):
         if n < 2:
             raise ValueError(f"n_samples = {n}: emcee needs at least 2 samples")
         self._init_outputs(k)
-        # the fitted row-noise model (its whitening is the posterior's GLS map; None: the rows as they are, least
-        # squares), kept so that the run can tell whether its intervals are trusted (study.identify.truncation)
+        # the fitted row-noise model (None: least squares on the rows as they are), kept for the trust verdict
         self.row_noise_ = None
         if prior is not None:
             return self._fit_informative(X, y, names, prior, progress)
@@ -348,9 +328,8 @@ class EmceeSampler(Estimator):
         return self
 
     def _sample_gaussian(self, mean, cov, names, progress: bool):
-        """emcee on N(mean, cov), in standardised coordinates; walkers drawn from it (no burn-in needed). Under
-        ``moves`` 'auto'/'laplace' the main move proposes from N(mean, cov) itself (an independence proposal
-        equal to the target: every such proposal is accepted, up to rounding)."""
+        """emcee on N(mean, cov) in standardised coordinates, walkers drawn from it (no burn-in); under 'auto' or
+        'laplace' the main move proposes from N(mean, cov) itself (every such proposal accepted, up to rounding)."""
         k = len(mean)
         sd = np.sqrt(np.diag(cov))
         Pz = np.linalg.inv(cov / np.outer(sd, sd))  # precision of the standardised coefficients
@@ -369,10 +348,9 @@ class EmceeSampler(Estimator):
         self._summarise(flat, q, k)
 
     def _fit_informative(self, X, y, names, prior: dict, progress: bool):
-        """The posterior under the run's informative prior N(mean0, sd0^2) per coefficient and the records'
-        sandwich likelihood (least squares with its block cluster-robust covariance: the MAP estimator's model, module
-        ``prior``). That posterior is Gaussian; emcee samples it (:meth:`_sample_gaussian`) so that the draws feed
-        the predictive bands and the chain diagnostics like any other run's."""
+        """The posterior under the informative prior N(mean0, sd0^2) per coefficient and the records' sandwich
+        likelihood (the MAP estimator's model, module ``prior``): Gaussian, but sampled (:meth:`_sample_gaussian`)
+        so that the draws feed the predictive bands and the chain diagnostics like any other run's."""
         from .prior import gaussian_posterior
 
         mean0 = np.array([prior[c][0] for c in names], float)
@@ -387,6 +365,8 @@ class EmceeSampler(Estimator):
 
     # ---------------------------------------------------------------------------------- output error
     def fit_output_error(self, problem, progress: bool = False):
+        """Sample the output-error posterior of ``problem`` (``study.identify.output_error``), the walkers started
+        at the Laplace approximation at the fit (differential evolution first per ``init``)."""
         from ..output_error import DIVERGED, local_fit
 
         k, nc = problem.k, len(problem.outputs)
@@ -453,16 +433,10 @@ class EmceeSampler(Estimator):
 
 
 def _oe_laplace(problem, x0, nobs, max_iter: int = 10):
-    """Laplace approximation (mean, covariance) of the output-error posterior at its mode, or None.
-
-    The mode is not the Gauss-Newton optimum of the spread-normalised cost: with each channel's noise scale
-    integrated out the posterior peaks where sum_c n_c log SSE_c is least, i.e. at the least-squares fit with each
-    channel weighted by 1 / sigma_c^2, sigma_c^2 = SSE_c / n_c at that fit (the stationary condition of both is
-    the same). It is found by reweighting (Gauss-Newton with the channel weights of the previous fit, until they
-    settle; measured: the spread-normalised optimum lay up to 20 posterior sd from it where the model is
-    approximate). Parameters: covariance (J^T J)^-1 of the Jacobian of the residuals normalised by sigma_c.
-    Noise scales: log sigma_c is asymptotically N(log sigma_c, 1 / (2 n_c)) (the log-likelihood's curvature in
-    log sigma is -2 n_c), independent of the parameters at the mode."""
+    """Laplace approximation (mean, covariance) of the output-error posterior at its mode, or None: the mode by
+    reweighted Gauss-Newton (channel weights 1 / sigma_c^2, sigma_c^2 = SSE_c / n_c, until they settle), the
+    parameters' covariance (J^T J)^-1 of the residuals normalised by sigma_c, log sigma_c N(log sigma_c, 1 / (2 n_c))
+    independent of them. Derivation: ``docs/concepts/emcee.md``."""
     from ..output_error import local_fit
 
     x = np.asarray(x0, float)
@@ -484,8 +458,7 @@ def _oe_laplace(problem, x0, nobs, max_iter: int = 10):
         np.linalg.cholesky(cov_th)
     except np.linalg.LinAlgError:
         return None
-    centre = x  # the mode in the box (the unconstrained Gauss-Newton centre, far outside the box where it binds,
-    # was measured to make a worse proposal: accepted 7 % of the time against 12 %)
+    centre = x  # the mode in the box, not the unconstrained Gauss-Newton centre (a worse proposal where it binds)
     k, nc = problem.k, len(nobs)
     cov = np.zeros((k + nc, k + nc))
     cov[:k, :k] = 0.5 * (cov_th + cov_th.T)
@@ -494,15 +467,11 @@ def _oe_laplace(problem, x0, nobs, max_iter: int = 10):
 
 
 class SnookerMove(emcee.moves.DESnookerMove):
-    """The differential-evolution snooker move of ter Braak & Vrugt (2008, Stat. Comput. 18, 435-446, Sec. 3.2),
-    as emcee's ``DESnookerMove`` with its normalisation corrected. From a walker x and a random walker z of the
-    other half of the ensemble, the move is along the line through x and z by gamma times the difference of the
-    projections of two more walkers z1, z2 on that line, accepted with the extra factor
-    (|x' - z| / |x - z|)^(d - 1). emcee (3.1.6, and its main branch) takes ``norm = |x - z|`` where its formulas
-    need ``|x - z|^2``: its step is |x - z| times the projected difference, and its factor the square root of the
-    right one, so the move does not leave the target invariant -- measured on a standard normal in 6 dimensions
-    (32 walkers, 5,000 steps, 4 chains): sd 0.82 alone, 0.96 mixed 0.2 with DEMove 0.8 (this estimator's 'de'
-    moves before), 1.00 corrected (``tests/test_emcee_regression_proposals.py``). Written here for that reason."""
+    """The differential-evolution snooker move of ter Braak & Vrugt (2008, Stat. Comput. 18, 435-446, Sec. 3.2):
+    from a walker x and a random walker z of the other half of the ensemble, a step along the line through x and z
+    by gamma times the difference of the projections of two more walkers z1, z2 on it, accepted with the extra
+    factor (|x' - z| / |x - z|)^(d - 1). Written here because emcee's ``DESnookerMove`` (3.1.6) normalises by
+    |x - z| where the formulas need |x - z|^2, so it does not leave the target invariant."""
 
     def get_proposal(self, s, c, random):
         randint = getattr(random, "integers", None) or random.randint
@@ -525,11 +494,10 @@ class SnookerMove(emcee.moves.DESnookerMove):
 
 class LaplaceProposal:
     """Independence proposal for emcee's ``MHMove``: a multivariate t with ``df`` degrees of freedom, location
-    ``mean`` and scale matrix ``inflate^2 cov`` (the Laplace approximation). Heavier tails and the slight
-    inflation keep the importance ratio target/proposal bounded where the posterior is wider than its Gaussian
-    approximation; the Metropolis-Hastings correction (emcee's ``factors``: log q(x) - log q(x')) makes the chain
-    exact whatever the proposal. ``df=inf``: a normal (the regression posteriors, Gaussian in closed form: the
-    proposal is then the target itself). Written here because emcee ships no independence move."""
+    ``mean`` and scale matrix ``inflate^2 cov`` (the Laplace approximation), cut by the box [lo, hi]. Heavy tails
+    and the inflation keep the ratio target / proposal bounded; the Metropolis-Hastings correction (emcee's
+    ``factors``) keeps the chain exact. ``df=inf``: a normal (the regression posteriors in closed form). Written
+    here because emcee ships no independence move."""
 
     def __init__(self, mean, cov, lo=None, hi=None, df: float = 5.0, inflate: float = 1.1):
         self.mean = np.asarray(mean, float)
@@ -566,11 +534,8 @@ class LaplaceProposal:
         return self.mean + (z @ self.L.T) / np.sqrt(w / self.df)[:, None]
 
     def __call__(self, coords, random):
-        # truncated to the prior box [lo, hi] by redrawing the walkers' proposals that fall outside (the prior is
-        # zero there; measured: the initial states' boxes cut the Laplace approximation, and untruncated draws
-        # were accepted 7 % of the time). The truncated density is q(x) / Z inside the box, Z the same for
-        # every draw, so the ratio q(x) / q(x') is unchanged; after 100 rounds a draw still outside is kept and
-        # rejected by the prior (the density inside stays proportional to q)
+        # cut by the prior box (redrawn outside it): the density q(x) / Z has one Z for every draw, so the ratio
+        # q(x) / q(x') is unchanged; a draw still outside after 100 rounds is kept and rejected by the prior
         q = self.draw(len(coords), random)
         return q, self.log_density(coords) - self.log_density(q)
 
@@ -587,14 +552,11 @@ class LaplaceProposal:
 
 class IidRegressionProposal:
     """Independence proposal for the 'regression_iid' likelihood: its posterior under a flat prior on the
-    coefficients (the Jeffreys prior on log sigma, as the target's), drawn exactly (normal-inverse-gamma; e.g.
-    Gelman et al. 2013, Bayesian Data Analysis, 3rd ed., Sec. 14.2): theta a multivariate t with n - k degrees of
-    freedom, location the least-squares estimate and scale s^2 (X^T X)^-1, s^2 = SS_min / (n - k); then
-    sigma^2 = SS(theta) / chi^2_n. Its log density in (theta, log sigma) is the target's likelihood,
-    -n log sigma - SS(theta) / (2 sigma^2), so the importance ratio target / proposal is the coefficients' normal
-    prior (nearly flat: ``prior_scale`` 10) inside the box of log sigma: nearly every proposal is accepted, and the
-    Metropolis-Hastings correction keeps the chain exact. Draws outside the box are redrawn (the density inside
-    stays proportional to the proposal's, as in :class:`LaplaceProposal`)."""
+    coefficients and the Jeffreys prior on log sigma, drawn exactly (normal-inverse-gamma; Gelman et al. 2013,
+    Bayesian Data Analysis, 3rd ed., Sec. 14.2): theta a multivariate t with n - k degrees of freedom, location the
+    least-squares estimate and scale s^2 (X^T X)^-1, s^2 = SS_min / (n - k); then sigma^2 = SS(theta) / chi^2_n.
+    Its log density is the target's likelihood, so nearly every proposal is accepted (``docs/concepts/emcee.md``);
+    draws outside the box of log sigma are redrawn, as in :class:`LaplaceProposal`."""
 
     def __init__(self, ls, A, ss_min: float, n: int, lo_s: float, hi_s: float):
         self.ls, self.A = np.asarray(ls, float), np.asarray(A, float)

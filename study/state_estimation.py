@@ -23,7 +23,7 @@ from numba import njit
 STATES = ("x0", "y0", "psi", "u", "v", "r", "u_dot", "v_dot", "r_dot")
 #: measured channels (the first six states, in the same order)
 CHANNELS = ("x0", "y0", "psi", "u", "v", "r")
-#: what ``options`` may hold, with their defaults (see the module docstring)
+#: what ``options`` may hold, with their defaults (see :func:`estimate_states`)
 DEFAULTS = {
     "position_std": "auto",  # m, absolute standard deviation of x0 and y0 (GNSS), or "auto"
     "heading_std": "auto",  # rad, of psi, or "auto"
@@ -399,8 +399,10 @@ def _yaw_loglik(t, psi, r, R_psi, R_r, q_r, x_init, P_init, h_max):
 # ------------------------------------------------------------------------------------------ helpers
 
 def noise_std(a: np.ndarray, order: int = 4) -> float:
-    """The white-noise standard deviation of a smooth signal plus noise, from its ``order``-th differences
-    (difference method, robust: median absolute deviation; [A2] in the module docstring). NaN ignored."""
+    """The white-noise standard deviation of a smooth signal plus noise (NaN ignored), from its ``order``-th
+    differences (the difference method: von Neumann et al. 1941; Hall, Kay & Titterington 1990), robustly by their
+    median absolute deviation (1.4826 MAD estimates a normal sd; Rousseeuw & Croux 1993). See [A2] in
+    ``docs/concepts/state-estimation.md``."""
     a = np.asarray(a, float)
     a = a[np.isfinite(a)]
     if len(a) <= order + 2:
@@ -502,8 +504,9 @@ def _optimise(fun, lo, hi, per_decade=GRID_PER_DECADE):
 
 def estimate_states(data, options: dict | None = None, **kw) -> StateEstimate:
     """Estimate ``u, v, r, u_dot, v_dot, r_dot`` (and smoothed ``x0, y0, psi``) from a record's positions and
-    heading, refining measured ``u, v, r`` when present. See the module docstring for the model, the
-    assumptions [A1]-[A5] and the sources.
+    heading, refining measured ``u, v, r`` when present. The model, the assumptions [A1]-[A5] and the sources are
+    in ``docs/concepts/state-estimation.md``. One function: its steps (the record's scales, measurement noise,
+    initial state, process noise, filter and smoother) run once, in order, each using the previous ones' locals.
 
     Parameters
     ----------

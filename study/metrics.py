@@ -224,6 +224,8 @@ def zigzag_metrics(df: pd.DataFrame, psi_switch: float | None = None, L: float |
     - *period*: time between successive rudder movements in the same direction; the first is from the first
       execute to the second reversal (a full cycle), the following ones from reversal k to reversal k+2.
 
+    One function: these standard definitions are computed in turn from the same rudder events and heading change.
+
     Parameters
     ----------
     df : DataFrame
@@ -359,6 +361,9 @@ def turning_metrics(df: pd.DataFrame, L: float | None = None, steady_tol: float 
     - *steady turning diameter*: a least-squares circle through the steady positions when the steady stretch
       covers at least 90 deg of heading (well-conditioned fit), else ``2 U / |r|``; ``2 U / |r|`` is always
       given as ``steady_turning_diameter_Ur``.
+
+    One function: these standard definitions are computed in turn from the same execution instant, turn side and
+    track in the initial course's axes.
 
     Parameters
     ----------

@@ -115,7 +115,8 @@ def _templates():
     their only closure variable is ``fingerprint``,
     which makes the on-disk cache key deterministic and specific to the kind and its sources (numba keys a
     cached closure by its code and the pickled closure variables; a pickled dispatcher carries a random uuid,
-    so a closure over ``accel`` itself would never be found in the cache again).
+    so a closure over ``accel`` itself would never be found in the cache again). It is long because it holds
+    the time loop ``_run`` whole (see its docstring).
     """
     fingerprint = 0
 
@@ -125,6 +126,9 @@ def _templates():
     def _run(P, dt, nsteps, save_every, cmd, nprop, ctrl, out, u, v, r, x, y, psi, delta,
              wu, wv, wr, wp, su, sv, sr, sx, sy, sp, D, C,
              sign, stage, nsw, psi_ref, started, pulled, hist, hist0):
+        """The time loop of ``integrate`` for a batch of members, compiled as one kernel. Kept whole: each step's
+        controller, actuator, output row and RK4 stages share the members' state arrays, the loop-invariant flags
+        (``has_current``, ``has_wind``) and the no-alias declaration of its array arguments."""
         if fingerprint < 0:  # never true; keeps the fingerprint a closure variable (part of the cache key)
             return -1
         k0 = K0

@@ -38,6 +38,7 @@ from markupsafe import Markup
 
 from .html_format import fmt_num, fmt_pct
 from .html_view import metric_rows, view
+from .report_schema import Report
 
 __all__ = ["fmt_num", "fmt_pct", "metrics_table_html", "render_html"]
 
@@ -62,13 +63,15 @@ def _css():
     return Markup(resources.files("study.doctor").joinpath("templates", "report.css").read_text(encoding="utf-8"))
 
 
-def render_html(report: Mapping | None, figures: Mapping[str, bytes] | None = None) -> str:
+def render_html(report: Report | Mapping | None, figures: Mapping[str, bytes] | None = None) -> str:
     """The self-contained HTML5 page of a doctor's report.
 
     ``report`` is the dict written to ``report.json`` (any key may be missing); ``figures`` maps a figure's file
     name (as in ``report["figures"][i]["file"]``) to its PNG bytes, embedded as data URIs.
     """
     page = environment().get_template("report.html.j2")
+    if isinstance(report, Report):
+        report = report.to_dict()
     return page.render(**view(report, figures), css=_css(), csp=Markup(CSP))  # both the package's own
 
 

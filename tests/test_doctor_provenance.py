@@ -45,6 +45,11 @@ def test_report_json_has_provenance_with_each_records_sha256(written):
         assert got[str(f)]["sha256"] == hashlib.sha256(f.read_bytes()).hexdigest()
         assert got[str(f)]["sha256_of"] == "file"
     assert [r["role"] for r in p["records"]] == ["train"] * 3 + ["validate"] * 2
+    # the report as written follows its schema, and reads back to the dict write_report returned
+    from study.doctor.report_schema import Report
+
+    assert Report.from_dict(rep).to_json() == (tmp / "report" / "report.json").read_text()
+    assert list(written[2]) == list(rep)
 
 
 def test_report_html_has_a_toc_whose_anchors_exist_and_the_provenance(written):

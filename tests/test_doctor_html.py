@@ -1,5 +1,6 @@
 """The model doctor's HTML report (study/doctor/html.py and its templates): a self-contained page, every string
-escaped, every figure embedded, robust to missing keys, every link of its contents to an anchor on the page; and,
+escaped, every figure embedded, an optional key of the report missing leaves its section out and a report off the
+schema is refused in one line, every link of its contents to an anchor on the page; and,
 in a real headless Chromium (Debian's ``chromium`` and ``chromium-driver``, driven by Selenium), the figures and
 the ranking actually render.
 
@@ -16,6 +17,7 @@ from html.parser import HTMLParser
 import pytest
 
 from study.doctor.html import fmt_num, fmt_pct, render_html
+from study.doctor.report_schema import Report, ReportError
 
 EVIL = "<script>alert(1)</script>"
 EVIL_ESC = "&lt;script&gt;alert(1)&lt;/script&gt;"
@@ -74,17 +76,19 @@ def _report() -> dict:
         "mode": "held_out",
         "train": ["zz10_stbd", EVIL],
         "validate": ["zz20_port", "tc35_stbd & pull-out"],
-        "baseline": {"validation_error": 0.8, "training_error": 0.6, "effects": [], "diverged": [],
+        "baseline": {"validation_error": 0.8, "training_error": 0.6, "effects": [], "diverged": [], "errors": {},
                      "parameters": {"X_vv": -0.0401234567, "Y_v": -0.315123, "N_r": -0.0499999}},
         "ranking": [
             {"effect": "current", "validation_error": 0.304, "improvement": 0.62, "significant": True,
-             "p_value": 0.0002, "parameters": {"u_c": 0.41234567, "psi_c": 0.523598}, "note": "steady, uniform"},
+             "p_value": 0.0002, "parameters": {"u_c": 0.41234567, "psi_c": 0.523598}, "training_error": 0.25,
+             "note": "steady, uniform"},
             {"effect": "wind", "validation_error": 0.61, "improvement": 0.2375, "significant": True,
-             "p_value": 0.012, "parameters": {"C_wind": 1.234567e-05}, "note": ""},
+             "p_value": 0.012, "parameters": {"C_wind": 1.234567e-05}, "training_error": 0.5, "note": ""},
             {"effect": "shallow_water", "validation_error": 0.79, "improvement": 0.0125, "significant": False,
-             "p_value": None, "parameters": {"h_T": float("nan")}, "note": "h/T bounded to [1.2, 10]"},
+             "p_value": None, "parameters": {"h_T": float("nan")}, "training_error": 0.6,
+             "note": "h/T bounded to [1.2, 10]"},
             {"effect": "yaw_bias", "validation_error": float("nan"), "improvement": float("nan"),
-             "significant": False, "p_value": float("nan"), "parameters": {}, "note": EVIL},
+             "significant": False, "p_value": float("nan"), "parameters": {}, "training_error": 0.6, "note": EVIL},
         ],
         "missing_effect": "current",
         "ambiguous": [],
@@ -120,8 +124,9 @@ def _report() -> dict:
                         "track error": "RMS distance between replayed and measured positions"},
         "stability": [{"step": 1, "k": 3, "n": 4, "text": "current: named in 3 of 4", "outcomes": []}],
         "diverged": {"baseline": []},
-        "final": {"effects": ["current", "wind"], "validation_error": 0.30, "diverged": [],
+        "final": {"effects": ["current", "wind"], "validation_error": 0.30, "diverged": [], "errors": {},
                   "parameters": {"X_vv": -0.041, "u_c": 0.41, "C_wind": 1.2e-05}},
+        "seconds": 12.5,
         "not_applicable": {"hull_nonlinear": "the model already identifies every nonlinear hull term"},
         "depths_h_T": {"zz10_stbd": None, "zz20_port": 2.5},
         "maneuver_metrics": [
@@ -140,6 +145,15 @@ def _report() -> dict:
              "section": "residuals"},
         ],
     }
+
+
+def _minimal(**keys) -> dict:
+    """A report with only its required keys (each as empty as it can be), and ``keys``."""
+    base = {"validation_error": 0.5, "training_error": 0.4, "effects": [], "parameters": {}, "errors": {}}
+    return {"verdict": "No significant missing effect", "baseline": base, "ranking": [], "missing_effect": None,
+            "ambiguous": [], "ladder": [], "final": dict(base), "errors_table": [], "notes": [], "mode": "given",
+            "train": [], "validate": [], "seconds": 1.0, "title": "", "created_by": "", "vessel": "", "model": "",
+            "structure": "", "worst_windows": [], "catalogue": [], "figures": [], **keys}
 
 
 class _Tree(HTMLParser):
@@ -271,28 +285,43 @@ def test_number_formatting():
     assert fmt_num(np.float32(0.5)) == "0.5" and fmt_num(np.float64("nan")) == "n/a"
 
 
+OPTIONAL = [k for k, v in Report.__dataclass_fields__.items() if v.default is None]
+
+
 @pytest.mark.parametrize("key", list(_report()))
-def test_any_key_may_be_missing(key, figures):
+def test_an_optional_key_may_be_missing_a_required_one_is_refused_by_name(key, figures):
     rep = _report()
     del rep[key]
-    page = render_html(rep, figures)
-    assert page.startswith("<!DOCTYPE html>") and page.rstrip().endswith("</html>")
-    assert "could not be rendered" not in page
+    if key in OPTIONAL:
+        page = render_html(rep, figures)
+        assert page.startswith("<!DOCTYPE html>") and page.rstrip().endswith("</html>")
+    else:
+        with pytest.raises(ReportError, match=f"^the doctor's report has no key '{key}' \\(required\\)$"):
+            render_html(rep, figures)
 
 
-@pytest.mark.parametrize("report", [
-    {}, None,
-    {k: None for k in _report()},
-    {k: [] for k in _report()},
-    {k: {} for k in _report()},
-    {"ranking": [{}], "ladder": [{}], "errors_table": [{}], "worst_windows": [{}], "catalogue": [{}],
-     "figures": [{}], "baseline": {"parameters": {"a": None}}},
-    {"ranking": ["current", 3], "ladder": "baseline", "train": "zz10", "figures": [{"file": "absent.png"}]},
-], ids=["empty", "none", "all-none", "all-lists", "all-dicts", "empty-entries", "odd-types"])
-def test_empty_or_odd_reports_do_not_crash(report):
-    page = render_html(report, {})
+def test_a_minimal_report_renders():
+    page = render_html(_minimal(), {})
     assert page.startswith("<!DOCTYPE html>") and "</html>" in page
     assert "<img" not in page
+
+
+@pytest.mark.parametrize("report, where", [
+    ({}, "has no key 'verdict'"), (None, "is a NoneType, not a JSON object"),
+    (_minimal(ranking=["current", 3]), "'ranking'[0] is a str, not an object"),
+    (_minimal(ladder="baseline"), "'ladder' is a str, not a list"),
+    (_minimal(train="zz10"), "'train' is a str, not a list"),
+    (_minimal(figures=[{"file": "absent.png"}]), "'figures'[0] has no key 'title'"),
+    (_minimal(ranking=[{}]), "'ranking'[0] has no key 'effect'"),
+    (_minimal(notes=[None]), "'notes'[0] is null, not a str"),
+    (_minimal(units=[]), "'units' is a list, not an object or null"),
+    (_minimal(provenance={"command": "x", "records": [1, None]}), "'provenance' has no key 'package'"),
+], ids=["empty", "none", "ranking-names", "ladder-text", "train-text", "figure-untitled", "empty-row",
+        "null-note", "units-list", "odd-provenance"])
+def test_a_report_off_the_schema_is_refused_in_one_line_naming_the_key(report, where):
+    with pytest.raises(ReportError) as e:
+        render_html(report, {})
+    assert where in str(e.value) and "\n" not in str(e.value)
 
 
 def test_missing_and_unlisted_figures(figures):
@@ -641,14 +670,14 @@ def test_identifiability_section_counts_undetermined_coefficients_and_conflicts_
          "ratio": 0.99, "moved_prior_sd": 0.0, "sentence": "Nvvv: NOT determined <b>"},
         {"coefficient": "Nv", "prior": -0.137, "estimate": -0.14, "prior_sd": 0.04, "posterior_sd": 0.001,
          "ratio": 0.03, "moved_prior_sd": -0.1, "sentence": "Nv: determined"}]}
-    h = render_html(r)
+    h = render_html(_minimal(**r))
     sec = h[h.index('id="identifiability"'):]
     sec = sec[:sec.index("</section>")]
     assert "1 of 3 anchored coefficients are not determined" in sec
     assert "1 moved more than two prior sd" in sec
     assert sec.count('class="undetermined"') == 2
     assert "&lt;b&gt;" in sec and "<b>" not in sec.split("<tbody>")[1].split("</tbody>")[0].replace("<b>ratio", "")
-    assert 'id="identifiability"' not in render_html({})
+    assert 'id="identifiability"' not in render_html(_minimal())
 
 
 # --------------------------------------------------------------------------------------------- the templates
@@ -669,28 +698,30 @@ def test_a_minimal_report_renders_from_the_templates_and_every_contents_link_has
 
     names = set(environment().list_templates())
     assert {"report.html.j2", "verdict.html.j2", "ladder.html.j2", "candidates.html.j2", "provenance.html.j2"} <= names
-    rep = {"verdict": "No significant missing effect", "missing_effect": None,
-           "ladder": [{"step": "baseline", "effects": [], "validation_error": 0.5, "training_error": 0.4}],
-           "notes": ["a <note>"]}
+    rep = _minimal(ladder=[{"step": "baseline", "effects": [], "validation_error": 0.5, "training_error": 0.4}],
+                   notes=["a <note>"])
     page = render_html(rep)
     css = resources.files("study.doctor").joinpath("templates", "report.css").read_text(encoding="utf-8")
     assert f"<style>{css}</style>" in page  # the package's style sheet, inlined as it is
     links, ids = _contents(page)
-    assert links == ["verdict", "ladder", "notes"]
+    assert links == ["verdict", "ladder", "candidates", "notes", "data"]
     assert set(links) <= ids and "a &lt;note&gt;" in page
     for sid in links[1:]:  # each section's heading is the contents' entry
         assert page.count(f'<section id="{sid}">') == 1
 
 
 def test_a_report_without_an_optional_section_still_renders(figures):
-    """Each optional part of the report left out: its section is absent from the page and from the contents,
-    every other section is still there, and every link of the contents has its anchor."""
+    """Each optional part of the report left out (or empty): its section is absent from the page and from the
+    contents, every other section is still there, and every link of the contents has its anchor."""
     full = render_html(_report(), figures)
     links_full, _ = _contents(full)
     for key, sid in (("worst_windows", "worst"), ("catalogue", "catalogue"), ("maneuver_metrics", "maneuvers"),
                      ("notes", "notes"), ("errors_table", "errors"), ("definitions", "definitions")):
         rep = _report()
-        del rep[key]
+        if key in OPTIONAL:
+            del rep[key]
+        else:
+            rep[key] = []
         page = render_html(rep, figures)
         links, ids = _contents(page)
         assert sid in links_full and sid not in links and f'id="{sid}"' not in page, key

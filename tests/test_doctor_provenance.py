@@ -45,6 +45,11 @@ def test_report_json_has_provenance_with_each_records_sha256(written):
         assert got[str(f)]["sha256"] == hashlib.sha256(f.read_bytes()).hexdigest()
         assert got[str(f)]["sha256_of"] == "file"
     assert [r["role"] for r in p["records"]] == ["train"] * 3 + ["validate"] * 2
+    # the report as written follows its schema, and reads back to the dict write_report returned
+    from study.doctor.report_schema import Report
+
+    assert Report.from_dict(rep).to_json() == (tmp / "report" / "report.json").read_text()
+    assert list(written[2]) == list(rep)
 
 
 def test_report_html_has_a_toc_whose_anchors_exist_and_the_provenance(written):
@@ -71,10 +76,17 @@ def test_the_basins_wind_and_the_setup_effect_are_in_the_report(written):
     assert rep["setup_effects"]["effects"] == ["yaw_bias"] and rep["setup_effects"]["left_out"] == {}
 
 
-def test_an_odd_provenance_still_renders_and_is_escaped():
-    page = render_html({"provenance": {"command": "python -m study.diagnose train=<a>", "records": [1, None]}})
+def test_the_provenance_is_escaped_and_an_odd_one_refused():
+    from study.doctor.report_schema import ReportError
+    from test_doctor_html import _minimal
+
+    prov = {"package": "study", "version": None, "revision": None, "modified": None, "date": "2024-01-01T00:00:00",
+            "command": "python -m study.diagnose train=<a>", "records": []}
+    page = render_html(_minimal(provenance=prov))
     assert "train=&lt;a&gt;" in page and 'href="#provenance"' in page
-    empty = render_html({})
+    with pytest.raises(ReportError, match=r"'provenance'\['records'\]\[0\] is an int, not an object"):
+        render_html(_minimal(provenance=dict(prov, records=[1, None])))
+    empty = render_html(_minimal())
     ids = set(re.findall(r'\sid="([^"]+)"', empty))
     assert set(re.findall(r'href="#([^"]+)"', empty)) <= ids
 

@@ -424,8 +424,9 @@ class Doctor:
 
     # ------------------------------------------------------------------------------------------ report
     def report(self) -> dict:
-        """The diagnosis as the report's JSON holds it: the verdict, baseline, ranking, ladder, stability, final
-        model, identifiability, errors per record and channel, notes, set-up effects, facilities and depths."""
+        """The diagnosis as the report's JSON holds it (the first fields of :class:`.report_schema.Report`): the
+        verdict, baseline, ranking, ladder, stability, final model, identifiability, errors per record and channel,
+        notes, set-up effects, facilities and depths."""
         r = self.result
         base, final = r["base"], r["final"]
         m = r["missing"]

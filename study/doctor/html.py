@@ -5,8 +5,8 @@
 bytes into a page that needs nothing else: the style sheet (``templates/report.css``) inline, images as ``data:``
 URIs, no JavaScript, and a Content-Security-Policy that forbids the browser any request (so nothing can leak from,
 or be fetched by, a report that is mailed around). The templates escape every string (record names come from
-users' files). The report is read once into the page's view data (:mod:`.html_view`): a key missing, or of a type
-it cannot be, leaves its section out.
+users' files). The report is read once into the page's view data (:mod:`.html_view`): an optional key the report
+does not have leaves its section out.
 
 Layout, for a naval architect reading on a laptop or on A4 paper: the verdict at the top (a diverged baseline
 is its own warning headline, and any other diverged replay gets a warning box under it), the direction
@@ -38,6 +38,7 @@ from markupsafe import Markup
 
 from .html_format import fmt_num, fmt_pct
 from .html_view import metric_rows, view
+from .report_schema import Report
 
 __all__ = ["fmt_num", "fmt_pct", "metrics_table_html", "render_html"]
 
@@ -62,14 +63,15 @@ def _css():
     return Markup(resources.files("study.doctor").joinpath("templates", "report.css").read_text(encoding="utf-8"))
 
 
-def render_html(report: Mapping | None, figures: Mapping[str, bytes] | None = None) -> str:
+def render_html(report: Report | dict, figures: Mapping[str, bytes] | None = None) -> str:
     """The self-contained HTML5 page of a doctor's report.
 
-    ``report`` is the dict written to ``report.json`` (any key may be missing); ``figures`` maps a figure's file
-    name (as in ``report["figures"][i]["file"]``) to its PNG bytes, embedded as data URIs.
+    ``report`` is a :class:`.report_schema.Report`, or the dict of a ``report.json`` (read by
+    :meth:`.report_schema.Report.from_dict`, which refuses one off the schema); ``figures`` maps a figure's file
+    name (as in ``report.figures[i]["file"]``) to its PNG bytes, embedded as data URIs.
     """
     page = environment().get_template("report.html.j2")
-    return page.render(**view(report, figures), css=_css(), csp=Markup(CSP))  # both the package's own
+    return page.render(**view(Report.from_dict(report), figures), css=_css(), csp=Markup(CSP))  # both the package's own
 
 
 def metrics_table_html(rows: list[dict]) -> str:

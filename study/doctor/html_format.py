@@ -1,6 +1,5 @@
-"""What the report page's view data (:mod:`.html_view`) is built from: the report normalised once, at the entry
-(:func:`normalise`: a key of an unexpected type counts as absent, a list entry that is not a row is dropped), the
-formatting of numbers and units, and which replays diverged.
+"""What the report page's view data (:mod:`.html_view`) is built from: the formatting of numbers and units, and
+which replays diverged, read from a :class:`.report_schema.Report` (whose schema says each key's type).
 
 Numbers are formatted here: 4 significant digits, ``n/a`` for a missing or not-a-number value; an error figure
 of a diverged replay (or an infinite one) is the word ``diverged`` (:data:`DIVERGED`), never a number; ``inf`` is
@@ -13,6 +12,8 @@ import numbers
 import re
 from collections.abc import Iterable, Mapping
 from typing import Any
+
+from .report_schema import Report
 
 NA = "n/a"
 #: a cell's text that the templates show as the diverged mark
@@ -33,49 +34,6 @@ STABILITY_DEF = ("how many of the n refits, each with one validation record left
                  "this step")
 REJECTED_DEF = ("a step whose validation error is not below the previous step's (or whose replay diverges) is "
                 "rejected: the ladder stops before it")
-
-_LISTS = ("ranking", "ladder", "errors_table", "worst_windows", "catalogue", "figures", "stability", "identifiability",
-          "maneuver_metrics", "notes", "train", "validate", "ambiguous")
-_DICTS = ("baseline", "final", "diverged", "units", "definitions", "not_applicable", "depths_h_T", "provenance",
-          "prediction_uncertainty", "separating_maneuver", "rudder_residual")
-#: list keys whose entries are rows (mappings); the others hold names or sentences
-_ROWS = ("ranking", "ladder", "errors_table", "worst_windows", "catalogue", "figures", "stability", "identifiability",
-         "maneuver_metrics")
-
-
-# --------------------------------------------------------------------------------------------- the entry
-
-
-def normalise(report: Any) -> dict:
-    """The report with every key of its expected type: lists as lists (a lone string is one item), mappings as
-    dicts, texts as strings; what cannot be read so is left out (absent, as if the report had not said it)."""
-    out: dict = {}
-    for k, v in (report.items() if isinstance(report, Mapping) else ()):
-        k = str(k)
-        if k in _LISTS:
-            one = (str, Mapping) if k in _ROWS else str  # a lone row, or a lone name
-            v = [v] if isinstance(v, one) else list(v) if isinstance(v, (list, tuple)) else None
-            if v is not None and k == "ranking":  # a bare name is a candidate with nothing else said
-                v = [c if isinstance(c, Mapping) else {"effect": c} for c in v]
-            elif v is not None and k in _ROWS:
-                v = [x for x in v if isinstance(x, Mapping)]
-            elif v is not None:
-                v = [str(x) for x in v if x is not None and str(x) != ""]
-        elif k in _DICTS:
-            v = {str(a): b for a, b in v.items()} if isinstance(v, Mapping) else None
-            if v is not None and k == "provenance":  # its records: rows too
-                recs = v.get("records")
-                v["records"] = [x for x in recs if isinstance(x, Mapping)] if isinstance(recs, (list, tuple)) else []
-        elif isinstance(v, (list, tuple, Mapping)):
-            v = None
-        elif v is not None and not isinstance(v, str):
-            v = str(v)
-        elif v is None:  # said and empty (a null missing_effect is a verdict): kept
-            out[k] = None
-        if v is not None:
-            out[k] = v
-    return out
-
 
 # --------------------------------------------------------------------------------------------- formatting
 
@@ -167,24 +125,8 @@ def param_value(v: Any) -> str:
     return v if isinstance(v, str) and as_float(v) is None else num(v)
 
 
-def records_of(x: Any) -> list[str]:
-    """Record names from a ``diverged`` entry (a list of names; a bare True is "some record", ``?``)."""
-    if x is True:
-        return ["?"]
-    if isinstance(x, str):
-        return [x] if x else []
-    if not isinstance(x, (list, tuple)):
-        return []
-    return [str(a) for a in x if a is not None and str(a) != ""]
-
-
 def known(recs: list[str]) -> list[str]:
     return [x for x in recs if x != "?"]
-
-
-def names(xs: Any) -> list[str]:
-    xs = [xs] if isinstance(xs, str) else xs if isinstance(xs, (list, tuple)) else []
-    return [str(x) for x in xs if x is not None and str(x) != ""]
 
 
 def unit(name: Any, units: Mapping, notes: dict | None = None) -> dict | None:
@@ -205,59 +147,50 @@ def unit_notes(notes: Mapping) -> list:
     return [{"sup": k, "text": t} for t, k in notes.items()]
 
 
-def param_items(p: Any, units: Mapping, notes: dict | None = None) -> list:
+def param_items(p: Mapping, units: Mapping, notes: dict | None = None) -> list:
     """Parameters as ``{name, value, unit}``, 4 significant digits."""
-    return [{"name": str(k), "value": param_value(v), "unit": unit(k, units, notes)}
-            for k, v in (p.items() if isinstance(p, Mapping) else ())]
+    return [{"name": k, "value": param_value(v), "unit": unit(k, units, notes)} for k, v in p.items()]
 
 
-def footnote(r: dict, terms: Iterable[str], extra: Iterable[tuple[str, str]] = ()) -> list:
+def footnote(r: Report, terms: Iterable[str], extra: Iterable[tuple[str, str]] = ()) -> list:
     """A footnote under a table: the report's definitions of ``terms`` (those it has), then ``extra``."""
-    d = r.get("definitions", {})
-    items = [(t, d[t]) for t in terms if isinstance(d.get(t), str) and d[t].strip()] + [(t, x) for t, x in extra if x]
-    return [{"term": t, "text": str(x).rstrip(". ")} for t, x in items]
+    d = r.definitions or {}
+    items = [(t, d[t]) for t in terms if d.get(t, "").strip()] + [(t, x) for t, x in extra if x]
+    return [{"term": t, "text": x.rstrip(". ")} for t, x in items]
 
 
-def definition(r: dict, term: str) -> dict | None:
-    x = r.get("definitions", {}).get(term)
-    return {"term": term, "text": x.rstrip(". ")} if isinstance(x, str) and x else None
+def definition(r: Report, term: str) -> dict | None:
+    x = (r.definitions or {}).get(term)
+    return {"term": term, "text": x.rstrip(". ")} if x else None
 
 
 # --------------------------------------------------------------------------------------------- divergence
 
 
-def base_diverged(r: dict) -> list[str]:
+def base_diverged(r: Report) -> list[str]:
     """Validation records on which the baseline's replay diverged (wherever the report says so)."""
-    out = records_of(r.get("baseline", {}).get("diverged")) + records_of(r.get("diverged", {}).get("baseline"))
-    out += [str(e["record"]) for e in r.get("errors_table", []) if e.get("baseline_diverged") is True
-            and e.get("record") is not None]
-    steps = r.get("ladder", [])
-    if steps and str(steps[0].get("step", "baseline")) == "baseline":
-        out += records_of(steps[0].get("diverged"))
+    out = r.baseline.get("diverged", []) + (r.diverged or {}).get("baseline", [])
+    out += [e["record"] for e in r.errors_table if e.get("baseline_diverged")]
+    if r.ladder and r.ladder[0]["step"] == "baseline":
+        out += r.ladder[0].get("diverged", [])
     return list(dict.fromkeys(out))
 
 
-def final_diverged(r: dict) -> list[str]:
-    out = records_of(r.get("final", {}).get("diverged"))
-    out += [str(e["record"]) for e in r.get("errors_table", []) if e.get("final_diverged") is True
-            and e.get("record") is not None]
+def final_diverged(r: Report) -> list[str]:
+    out = r.final.get("diverged", []) + [e["record"] for e in r.errors_table if e.get("final_diverged")]
     return list(dict.fromkeys(out))
 
 
-def verdict_diverged(r: dict) -> bool:
-    return (r.get("verdict") or "").strip().lower().startswith("diverged") or bool(base_diverged(r))
+def verdict_diverged(r: Report) -> bool:
+    return r.verdict.strip().lower().startswith("diverged") or bool(base_diverged(r))
 
 
-def no_final_model(r: dict) -> bool:
+def no_final_model(r: Report) -> bool:
     """True when the report says no effect was added (so no "model with the effects" is drawn anywhere)."""
-    fin, base = r.get("final", {}).get("effects"), r.get("baseline", {}).get("effects")
-    if isinstance(fin, list) and isinstance(base, list):
-        return sorted(map(str, fin)) == sorted(map(str, base))
-    steps = r.get("ladder", [])
-    return bool(steps) and not any(s.get("rejected") is not True for s in steps[1:])
+    return sorted(r.final["effects"]) == sorted(r.baseline["effects"])
 
 
-def divergences(r: dict) -> list[dict]:
+def divergences(r: Report) -> list[dict]:
     """``{what, on}`` of every replay that diverged: the baseline, each ladder step, the final model, each
     candidate of the ranking (``on``: the records named)."""
     out, seen = [], set()
@@ -269,47 +202,42 @@ def divergences(r: dict) -> list[dict]:
             out.append({"what": what, "on": known(recs)})
 
     add("the baseline model", base_diverged(r))
-    for s in r.get("ladder", []):
-        if str(s.get("step")) != "baseline":
-            recs = records_of(s.get("diverged"))
-            v = as_float(s.get("validation_error"))
-            if not recs and v is not None and math.isinf(v):
+    for s in r.ladder:
+        if s["step"] != "baseline":
+            recs = s.get("diverged", [])
+            if not recs and math.isinf(s["validation_error"]):
                 recs = ["?"]
             tag = " (rejected)" if s.get("rejected") else ""
-            add(f"ladder step {s.get('step')}{tag}", recs, f"step {s.get('step')}")
-    for step, recs in r.get("diverged", {}).items():
+            add(f"ladder step {s['step']}{tag}", recs, f"step {s['step']}")
+    for step, recs in (r.diverged or {}).items():
         if step != "baseline":
-            add(f"ladder step {step}", records_of(recs), f"step {step}")
+            add(f"ladder step {step}", recs, f"step {step}")
     if not no_final_model(r):  # else it is the baseline, said above
         add("the final model", final_diverged(r))
-    for c in r["ranking"] if "ranking" in r else []:
-        if c.get("diverged") is True or records_of(c.get("diverged_records")):
-            add(f"candidate {c.get('effect')}", records_of(c.get("diverged_records")) or ["?"])
+    for c in r.ranking:
+        if c.get("diverged") or c.get("diverged_records"):
+            add(f"candidate {c['effect']}", c.get("diverged_records") or ["?"])
     return out
 
 
-def step_diverged(s: Mapping, i: int, r: dict) -> bool:
-    v = as_float(s.get("validation_error"))
-    if records_of(s.get("diverged")) or (v is not None and math.isinf(v)):
+def step_diverged(s: Mapping, i: int, r: Report) -> bool:
+    if s.get("diverged") or math.isinf(s["validation_error"]):
         return True
-    return i == 0 and str(s.get("step", "baseline")) == "baseline" and bool(base_diverged(r))
+    return i == 0 and s["step"] == "baseline" and bool(base_diverged(r))
 
 
-def stability_by_step(r: dict) -> dict[int, Mapping]:
+def stability_by_step(r: Report) -> dict[int, Mapping]:
     out: dict[int, Mapping] = {}
-    for s in r.get("stability", []):
-        step = finite(s.get("step"))
-        if step is not None:
-            out.setdefault(int(step), s)
+    for s in r.stability or []:
+        if s.get("step") is not None:
+            out.setdefault(s["step"], s)
     return out
 
 
 def named_in(s: Mapping | None, long: bool = False) -> str:
-    """``named in k of n`` of a stability entry (its text when k/n are missing); empty without one."""
+    """``named in k of n`` of a stability entry (its text when k is None); empty without one."""
     if s is None:
         return ""
-    k, n = finite(s.get("k")), finite(s.get("n"))
-    if k is not None and n is not None:
-        return f"named in {int(k)} of {int(n)}" + (" with one validation record left out" if long else "")
-    t = s.get("text")
-    return t if isinstance(t, str) and long else ""
+    if s["k"] is not None:
+        return f"named in {s['k']} of {s['n']}" + (" with one validation record left out" if long else "")
+    return s["text"] if long else ""

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from .html_format import as_text, interval, num
+from .report_schema import Report
 
 PARTS = (("s_id", "identification"), ("s_struct", "structure"), ("s_extrap", "extrapolation"))
 
@@ -41,17 +42,17 @@ def _turn(t: Mapping) -> dict:
             "metrics": metrics, "alternatives": ", ".join(map(str, t.get("alternatives") or [])) or "none"}
 
 
-def _validation(r: Mapping, sec: Mapping) -> dict | None:
+def _validation(r: Report, sec: Mapping) -> dict | None:
     recs = [{"record": str(n), "text": as_text(x.get("text"))}
             for n, x in ((sec.get("final") or {}).get("records") or {}).items()]
     rows = []
-    for m in r.get("maneuver_metrics", []):
-        if m.get("unit") == "m" or "final_uncertainty" not in m:
+    for m in r.maneuver_metrics or []:
+        if m["unit"] == "m" or "final_uncertainty" not in m:
             continue  # the metres rows repeat the ship lengths' ones
-        iv, meas = interval(m.get("final_low"), m.get("final_high")), m.get("measured")
+        iv, meas = interval(m.get("final_low"), m.get("final_high")), m["measured"]
         held = None if iv is None or not _real(meas) else m["final_low"] <= meas <= m["final_high"]
-        rows.append({"record": str(m.get("record")), "metric": str(m.get("metric")), "measured": num(meas),
-                     "final": num(m.get("final")), "interval": iv, "held": held,
+        rows.append({"record": m["record"], "metric": m["metric"], "measured": num(meas),
+                     "final": num(m["final"]), "interval": iv, "held": held,
                      **_spread(m.get("final_uncertainty") or {}), "carriers": _carriers(m.get("carriers"))})
     return {"records": recs, "rows": rows} if recs or rows else None
 
@@ -73,9 +74,9 @@ def _calibration(sec: Mapping) -> list:
     return out
 
 
-def uncertainty_view(r: Mapping) -> dict | None:
+def uncertainty_view(r: Report) -> dict | None:
     """The section's data, None when the report has no ``prediction_uncertainty``."""
-    sec = r.get("prediction_uncertainty")
+    sec = r.prediction_uncertainty
     if not sec:
         return None
     return {"summary": [str(s) for s in sec.get("summary") or []],

@@ -1,9 +1,9 @@
-"""The report page's view data: the dict of ``report.json`` turned once into plain lists and dicts of strings and
-numbers, in the order and with the words the page shows them; the templates of ``templates/`` lay them out and
+"""The report page's view data: a :class:`.report_schema.Report` turned once into plain lists and dicts of strings
+and numbers, in the order and with the words the page shows them; the templates of ``templates/`` lay them out and
 :mod:`.html` renders them.
 
-:func:`view` normalises the report at the entry (:func:`.html_format.normalise`); each section's function returns
-its data, or None when the report has nothing for it: the page and its table of contents then leave it out.
+Each section's function reads the report as its schema types it and returns the section's data, or None when the
+report has nothing for it: the page and its table of contents then leave it out.
 """
 from __future__ import annotations
 
@@ -13,11 +13,11 @@ import re
 from collections.abc import Mapping
 from typing import Any
 
-from .html_format import (DIVERGED, MODES, NA, REJECTED_DEF, SECTIONS, STABILITY_DEF, TITLES, as_float, as_text,
-                          base_diverged, definition, divergences, err, final_diverged, finite, fmt_p, fmt_pct,
-                          footnote, interval, known, metric_num, named_in, names, no_final_model, normalise, num,
-                          param_items, param_value, pct, records_of, stability_by_step, step_diverged, unit,
-                          unit_notes, verdict_diverged)
+from .html_format import (DIVERGED, MODES, NA, REJECTED_DEF, SECTIONS, STABILITY_DEF, TITLES, as_text, base_diverged,
+                          definition, divergences, err, final_diverged, finite, fmt_p, fmt_pct, footnote, interval,
+                          known, metric_num, named_in, no_final_model, num, param_items, param_value, pct,
+                          stability_by_step, step_diverged, unit, unit_notes, verdict_diverged)
+from .report_schema import Report
 
 
 def _section(sid: str, **body) -> dict:
@@ -27,11 +27,10 @@ def _section(sid: str, **body) -> dict:
 # --------------------------------------------------------------------------------------------- the top
 
 
-def summary(r: dict) -> list:
-    rows = [(label, r[k]) for k, label in (("vessel", "Vessel"), ("model", "Model"), ("structure", "Structure"))
-            if r.get(k)]
-    if r.get("mode"):
-        rows.append(("Validation", MODES.get(r["mode"], r["mode"])))
+def summary(r: Report) -> list:
+    rows = [(label, v) for v, label in ((r.vessel, "Vessel"), (r.model, "Model"), (r.structure, "Structure")) if v]
+    if r.mode:
+        rows.append(("Validation", MODES.get(r.mode, r.mode)))
     return [{"label": a, "value": b} for a, b in rows]
 
 
@@ -46,19 +45,17 @@ def _with_units(text: str, units: Mapping) -> list:
     return pieces + [{"text": text[at:], "unit": None}]
 
 
-def verdict(r: dict) -> dict:
-    """The verdict box: its kind (``diverged``, ``found``, ``ambiguous``, ``none`` or ``unknown``), what its
-    headline names, the report's verdict sentence (with units) and what follows it."""
-    missing = r.get("missing_effect") if (r.get("missing_effect") or "").strip() else None
-    ambiguous = r.get("ambiguous", [])
-    ranking = r.get("ranking", [])
+def verdict(r: Report) -> dict:
+    """The verdict box: its kind (``diverged``, ``found``, ``ambiguous`` or ``none``), what its headline names, the
+    report's verdict sentence (with units) and what follows it."""
+    missing, ambiguous = r.missing_effect, r.ambiguous
     stab = stability_by_step(r).get(1)
     v: dict = {"named": named_in(stab, long=True), "role": "status", "others": [], "defs": []}
-    text = r.get("verdict") or ""
+    text = r.verdict
     show_text = True
     if verdict_diverged(r):
         recs = base_diverged(r)
-        n_val = len(r.get("baseline", {}).get("errors") or {}) or len(r.get("validate", []))
+        n_val = len(r.baseline["errors"]) or len(r.validate)
         v.update(kind="diverged", cls="verdict diverged", role="alert", on=known(recs),
                  of=f" {len(recs)} of {n_val}" if recs and n_val >= len(recs) and recs != ["?"] else "")
         if text.strip().lower().startswith("diverged"):
@@ -67,31 +64,29 @@ def verdict(r: dict) -> dict:
         v["others"] = [d for d in divergences(r) if d["what"] != "the baseline model"]
         v["defs"] = [definition(r, "diverged")]
     elif missing is not None:
-        cand = next((c for c in ranking if str(c.get("effect")) == missing), None)
+        cand = next((c for c in r.ranking if c["effect"] == missing), None)
         bits = []
         if cand is not None:
-            if finite(cand.get("improvement")) is not None and cand.get("diverged") is not True:
-                bits.append(f"validation error down by {fmt_pct(cand.get('improvement'))}")
-            p = as_float(cand.get("p_value"))
+            if finite(cand["improvement"]) is not None and not cand.get("diverged"):
+                bits.append(f"validation error down by {fmt_pct(cand['improvement'])}")
+            p = cand["p_value"]
             if p is not None and not math.isnan(p):
                 bits.append(f"p {fmt_p(p)}" if p < 1e-3 else f"p = {fmt_p(p)}")
         v.update(kind="found", cls="verdict found", missing=missing, bits=bits,
                  inseparable=[a for a in ambiguous if a != missing])
     elif ambiguous:
         v.update(kind="ambiguous", cls="verdict ambiguous", ambiguous=ambiguous)
-    elif "missing_effect" in r or ranking:
+    else:
         same = named_in(stab)
         v.update(kind="none", cls="verdict none", same=same.replace("named in ", ""))
-    else:
-        v.update(kind="unknown", cls="verdict unknown")
-    v["text"] = _with_units(text, r.get("units", {})) if text and show_text else None
+    v["text"] = _with_units(text, r.units or {}) if text and show_text else None
     if v["kind"] != "diverged" and "validation error" in text:
         v["defs"] = [definition(r, "validation error")]
     v["defs"] = [d for d in v["defs"] if d]
     return v
 
 
-def divergence(r: dict) -> dict | None:
+def divergence(r: Report) -> dict | None:
     """The warning box listing every diverged replay (when the verdict is not already the divergence)."""
     items = [] if verdict_diverged(r) else divergences(r)
     return {"entries": items, "defs": [d for d in [definition(r, "diverged")] if d]} if items else None
@@ -100,28 +95,27 @@ def divergence(r: dict) -> dict | None:
 # --------------------------------------------------------------------------------------------- the tables
 
 
-def _baseline_val(r: dict) -> float | None:
+def _baseline_val(r: Report) -> float | None:
     if base_diverged(r):
         return None
-    b = finite(r.get("baseline", {}).get("validation_error"))
+    b = finite(r.baseline["validation_error"])
     if b:
         return b
-    steps = r.get("ladder", [])
-    v = finite(steps[0].get("validation_error")) if steps else None
+    v = finite(r.ladder[0]["validation_error"]) if r.ladder else None
     return v or None
 
 
-def ladder(r: dict) -> dict | None:
-    steps = r.get("ladder", [])
+def ladder(r: Report) -> dict | None:
+    steps = r.ladder
     if not steps:
         return None
     base, base_div, stab = _baseline_val(r), bool(base_diverged(r)), stability_by_step(r)
     rows, any_div, any_rej, any_stab = [], False, False, False
     for i, s in enumerate(steps):
-        div, rejected = step_diverged(s, i, r), s.get("rejected") is True
+        div, rejected = step_diverged(s, i, r), s.get("rejected", False)
         any_div |= div
         any_rej |= rejected
-        v = finite(s.get("validation_error"))
+        v = finite(s["validation_error"])
         if div:
             fall = {"kind": "diverged"}
         elif base is not None and v is not None:
@@ -132,14 +126,14 @@ def ladder(r: dict) -> dict | None:
         named = named_in(stab.get(i) if i > 0 and not rejected else None)
         any_stab |= bool(named)
         if rejected:
-            status = {"kind": "rejected", "why": as_text(s.get("reason"))}
+            status = {"kind": "rejected", "why": s.get("reason", "")}
         elif div:
-            status = {"kind": "diverged", "on": ", ".join(known(records_of(s.get("diverged")))) or "a record"}
+            status = {"kind": "diverged", "on": ", ".join(known(s.get("diverged", []))) or "a record"}
         else:
             status = {"kind": "given" if i == 0 else "accepted"}
         rows.append({"cls": " ".join(c for c in ("rejected" if rejected else "", "diverged-row" if div else "") if c),
-                     "step": as_text(s.get("step")), "effects": names(s.get("effects")),
-                     "validation": err(s.get("validation_error"), div), "training": err(s.get("training_error")),
+                     "step": s["step"], "effects": s["effects"],
+                     "validation": err(s["validation_error"], div), "training": err(s["training_error"]),
                      "fall": fall, "named": named, "status": status})
     extra = [("fall of validation error vs baseline", "(baseline - step) / baseline of the validation error")]
     extra += ([("stability (named in k of n)", STABILITY_DEF)] if any_stab else []) + \
@@ -148,34 +142,28 @@ def ladder(r: dict) -> dict | None:
     return _section("ladder", rows=rows, defs=defs)
 
 
-def ranking(r: dict) -> dict | None:
-    cands, b, units, missing = r.get("ranking", []), r.get("baseline", {}), r.get("units", {}), r.get("missing_effect")
+def ranking(r: Report) -> dict | None:
+    units = r.units or {}
     rows, any_div, notes = [], False, {}
-    for c in cands:
-        div_recs = records_of(c.get("diverged_records"))
-        v = as_float(c.get("validation_error"))
-        div = c.get("diverged") is True or bool(div_recs) or (v is not None and math.isinf(v))
+    for c in r.ranking:
+        div_recs = c.get("diverged_records", [])
+        div = c.get("diverged", False) or bool(div_recs) or math.isinf(c["validation_error"])
         any_div |= div
-        sig = not div and (c.get("significant") is True or (
-            not isinstance(c.get("significant"), (str, type(None))) and bool(c.get("significant"))))
+        sig = not div and c["significant"]
         cls = "candidate significant" if sig else "candidate"
         cls += " diverged-row" if div else ""
-        cls += " chosen" if missing is not None and str(c.get("effect")) == str(missing) else ""
+        cls += " chosen" if c["effect"] == r.missing_effect else ""
         mt = c.get("metrics") or {}
         e0, e1 = finite(mt.get("baseline_error")), finite(mt.get("error"))
-        rows.append({"cls": cls, "effect": as_text(c.get("effect")), "validation": err(c.get("validation_error"), div),
-                     "on": known(div_recs) if div else [], "improvement": pct(c.get("improvement"), div),
+        rows.append({"cls": cls, "effect": c["effect"], "validation": err(c["validation_error"], div),
+                     "on": known(div_recs) if div else [], "improvement": pct(c["improvement"], div),
                      "metrics": [fmt_pct(e1), fmt_pct(e0)] if e0 is not None and e1 is not None else None,
-                     "significant": sig, "p": fmt_p(c.get("p_value")),
-                     "params": param_items(c.get("parameters"), units, notes), "note": as_text(c.get("note"))})
-    na = [{"effect": k, "why": as_text(x)} for k, x in r.get("not_applicable", {}).items()]
-    if not rows and not b:
-        return _section("candidates", baseline=None, rows=[], na=na, tried=False) if na else None
-    base = None
-    if b:
-        bdiv = base_diverged(r)
-        base = {"diverged": bool(bdiv), "validation": err(b.get("validation_error")), "on": known(bdiv),
-                "training": err(b.get("training_error"))}
+                     "significant": sig, "p": fmt_p(c["p_value"]),
+                     "params": param_items(c["parameters"], units, notes), "note": c["note"]})
+    na = [{"effect": k, "why": x} for k, x in (r.not_applicable or {}).items()]
+    b, bdiv = r.baseline, base_diverged(r)
+    base = {"diverged": bool(bdiv), "validation": err(b["validation_error"]), "on": known(bdiv),
+            "training": err(b.get("training_error"))}
     extra = [("p-value", "of the paired t-test of the per-record validation errors against the baseline's "
                          "(n/a when there are too few validation records to run it)"),
              ("manoeuvre metrics error", "the mean over the validation turning circles' and zigzags' metrics "
@@ -186,17 +174,17 @@ def ranking(r: dict) -> dict | None:
                     defs=footnote(r, ["validation error", "improvement"] + (["diverged"] if any_div else []), extra))
 
 
-def errors(r: dict) -> dict | None:
+def errors(r: Report) -> dict | None:
     rows, any_div, channels = [], False, set()
     bdiv, fdiv = set(base_diverged(r)), set(final_diverged(r))
-    inf = lambda e, keys: any((v := as_float(e.get(k))) is not None and math.isinf(v) for k in keys)  # noqa: E731
-    for e in r.get("errors_table", []):
-        rec = str(e.get("record"))
-        db = e.get("baseline_diverged") is True or rec in bdiv or inf(e, ("baseline_rmse", "baseline_nrmse"))
-        df = e.get("final_diverged") is True or rec in fdiv or inf(e, ("final_rmse", "final_nrmse"))
+    inf = lambda e, keys: any(e[k] is not None and math.isinf(e[k]) for k in keys)  # noqa: E731
+    for e in r.errors_table:
+        rec = e["record"]
+        db = e.get("baseline_diverged", False) or rec in bdiv or inf(e, ("baseline_rmse", "baseline_nrmse"))
+        df = e.get("final_diverged", False) or rec in fdiv or inf(e, ("final_rmse", "final_nrmse"))
         any_div |= db or df
-        channels.add(str(e.get("channel")))
-        b, f = finite(e.get("baseline_nrmse")), finite(e.get("final_nrmse"))
+        channels.add(e["channel"])
+        b, f = finite(e["baseline_nrmse"]), finite(e["final_nrmse"])
         if db or df:
             change = DIVERGED
         elif b is not None and f is not None and b != 0.0:
@@ -204,10 +192,9 @@ def errors(r: dict) -> dict | None:
             change = change if change.startswith("-") else "+" + change
         else:
             change = NA
-        cells = [err(e.get("baseline_rmse"), db), err(e.get("final_rmse"), df), err(e.get("baseline_nrmse"), db),
-                 err(e.get("final_nrmse"), df)]
-        rows.append({"record": as_text(e.get("record")), "channel": as_text(e.get("channel")),
-                     "unit": as_text(e.get("unit")), "cells": cells, "change": change})
+        cells = [err(e["baseline_rmse"], db), err(e["final_rmse"], df), err(e["baseline_nrmse"], db),
+                 err(e["final_nrmse"], df)]
+        rows.append({"record": rec, "channel": e["channel"], "unit": e["unit"], "cells": cells, "change": change})
     if not rows:
         return None
     extra = [("RMSE", "root-mean-square error of the replayed channel, in the channel's unit"),
@@ -222,49 +209,45 @@ def metric_rows(rows: list, bdiv: set = frozenset(), fdiv: set = frozenset()) ->
     that diverged has no metric, and says so."""
     from ..maneuver_metrics import COLUMNS, TURNING_METRICS, ZIGZAG_METRICS
 
-    units = {m: u for m, u, _ in TURNING_METRICS + ZIGZAG_METRICS}
     descriptions = {m: d for m, _, d in TURNING_METRICS + ZIGZAG_METRICS}
     out = []
     for x in rows:
-        m, rec = x.get("metric"), str(x.get("record"))
+        m, rec = x["metric"], x["record"]
         cells = []
         for c in COLUMNS:
             dv = (c == "baseline" and rec in bdiv) or (c == "final" and rec in fdiv)
-            cells.append({"value": DIVERGED, "interval": None} if dv and finite(x.get(c)) is None else
-                         {"value": metric_num(x.get(c)), "interval": interval(x.get(f"{c}_low"), x.get(f"{c}_high"))})
-        out.append({"record": as_text(x.get("record")), "metric": as_text(m), "tip": descriptions.get(str(m)),
-                    "unit": as_text(x.get("unit", units.get(str(m), ""))), "cells": cells})
+            cells.append({"value": DIVERGED, "interval": None} if dv and finite(x[c]) is None else
+                         {"value": metric_num(x[c]), "interval": interval(x.get(f"{c}_low"), x.get(f"{c}_high"))})
+        out.append({"record": rec, "metric": m, "tip": descriptions.get(m), "unit": x["unit"], "cells": cells})
     return out
 
 
-def maneuvers(r: dict) -> dict | None:
-    if "maneuver_metrics" not in r:
+def maneuvers(r: Report) -> dict | None:
+    if r.maneuver_metrics is None:
         return None
     from ..maneuver_metrics import TURNING_METRICS, ZIGZAG_METRICS
 
-    rows = [x for x in r["maneuver_metrics"] if x.get("metric") is not None]
+    rows = r.maneuver_metrics
     bdiv, fdiv = set(base_diverged(r)), set(final_diverged(r))
-    shown = {str(x.get("metric")) for x in rows}
-    fin, base = r.get("final", {}).get("effects"), r.get("baseline", {}).get("effects")
-    same = isinstance(fin, list) and isinstance(base, list) and sorted(map(str, fin)) == sorted(map(str, base))
-    return _section("maneuvers", rows=metric_rows(rows, bdiv, fdiv), same=same,
+    shown = {x["metric"] for x in rows}
+    return _section("maneuvers", rows=metric_rows(rows, bdiv, fdiv), same=no_final_model(r),
                     metrics=[{"metric": m, "unit": u, "text": d} for m, u, d in TURNING_METRICS + ZIGZAG_METRICS
                              if m in shown], defs=footnote(r, ["diverged"] if (bdiv or fdiv) else []))
 
 
-def identifiability(r: dict) -> dict | None:
+def identifiability(r: Report) -> dict | None:
     """Per anchored coefficient of the baseline fit: prior, estimate, prior and posterior sd, their ratio and the
     doctor's sentence; the coefficients the records do not determine, and prior-data conflicts, marked."""
     rows, n_not, n_conf = [], 0, 0
-    for it in r.get("identifiability", []):
-        ratio, moved = as_float(it.get("ratio")), as_float(it.get("moved_prior_sd"))
-        undetermined, conflict = ratio is not None and ratio >= 0.9, moved is not None and abs(moved) > 2.0
+    for it in r.identifiability or []:
+        ratio, moved = it["ratio"], it["moved_prior_sd"]
+        undetermined, conflict = ratio >= 0.9, abs(moved) > 2.0
         n_not += undetermined
         n_conf += conflict
-        rows.append({"marked": undetermined or conflict, "coefficient": as_text(it.get("coefficient")),
-                     "cells": [num(it.get("prior")), num(it.get("estimate")), num(it.get("prior_sd"), 3),
-                               num(it.get("posterior_sd"), 3), num(ratio, 2), num(moved, 2)],
-                     "sentence": as_text(it.get("sentence"))})
+        rows.append({"marked": undetermined or conflict, "coefficient": it["coefficient"],
+                     "cells": [num(it["prior"]), num(it["estimate"]), num(it["prior_sd"], 3),
+                               num(it["posterior_sd"], 3), num(ratio, 2), num(moved, 2)],
+                     "sentence": it["sentence"]})
     if not rows:
         return None
     defs = footnote(r, [], [("ratio", "posterior sd / prior sd: near 0 the records determine the coefficient, near 1 "
@@ -286,19 +269,16 @@ def _mime(data: bytes) -> str:
     return "image/png"
 
 
-def _caption(meta: Mapping, r: dict) -> Any:
+def _caption(meta: Mapping, r: Report) -> str:
     """The figure's caption, less what the figure cannot show in this report."""
-    cap = meta.get("caption")
-    if not isinstance(cap, str):
-        return cap
-    sec = str(meta.get("section") or "")
+    cap, sec = meta["caption"], meta["section"]
     if sec == "compare" and no_final_model(r):
         cap = re.sub(r"Measured \(dots\), the baseline model \(red\) and the model with the effects found \(blue\)",
                      "Measured (dots) and the baseline model (red)", cap)
         cap = re.sub(r",? *(and )?the model with the effects found \(blue\)", "", cap)
     if sec == "ladder" and ("hatched" in cap or "marked" in cap):
-        steps = r.get("ladder", [])
-        rej = any(s.get("rejected") is True for s in steps)
+        steps = r.ladder
+        rej = any(s.get("rejected") for s in steps)
         div = any(step_diverged(s, i, r) for i, s in enumerate(steps))
         head = cap.split(";")[0].rstrip(". ")
         if len(steps) <= 1:
@@ -309,42 +289,41 @@ def _caption(meta: Mapping, r: dict) -> Any:
     return cap
 
 
-def _figure(meta: Mapping, data: Any, r: dict) -> dict:
-    file, title, caption = meta.get("file"), meta.get("title"), _caption(meta, r)
+def _figure(meta: Mapping, data: Any, r: Report) -> dict:
+    file, title, caption = meta["file"], meta["title"], _caption(meta, r)
     src = None
     if isinstance(data, (bytes, bytearray, memoryview)) and len(data) > 0:
         data = bytes(data)
         src = f"data:{_mime(data)};base64,{base64.b64encode(data).decode('ascii')}"
-    return {"file": as_text(file), "title": as_text(title), "caption": as_text(caption), "src": src,
-            "alt": next((str(x) for x in (title, caption) if x not in (None, "")), f"Figure {file}")}
+    return {"file": file, "title": title, "caption": caption, "src": src, "alt": title or caption or f"Figure {file}"}
 
 
-def figures(r: dict, figs: Mapping) -> dict | None:
-    metas = list(r.get("figures", []))
-    listed = {str(m.get("file")) for m in metas}
+def figures(r: Report, figs: Mapping) -> dict | None:
+    metas = list(r.figures)
+    listed = {m["file"] for m in metas}
     # figures handed over but not listed in the report still belong in it (after the listed ones)
     metas += [{"file": k, "title": "", "caption": "", "section": "other"} for k in sorted(figs) if k not in listed]
     if not metas:
         return None
     order, groups = list(SECTIONS), {}
     for m in metas:
-        sec = str(m.get("section") or "other")
+        sec = m["section"] or "other"
         order += [] if sec in order else [sec]
         groups.setdefault(sec, []).append(m)
     return _section("figures", groups=[
         {"section": sec, "heading": SECTIONS.get(sec, "Other figures" if sec == "other" else
                                                   sec.replace("_", " ").capitalize()),
-         "figures": [_figure(m, figs.get(str(m.get("file"))), r) for m in groups[sec]]}
+         "figures": [_figure(m, figs.get(m["file"]), r) for m in groups[sec]]}
         for sec in order if sec in groups])
 
 
 # --------------------------------------------------------------------------------------------- the rest
 
 
-def worst(r: dict) -> dict | None:
-    time = lambda t: NA if finite(t) is None else f"{finite(t):.1f}"  # noqa: E731
-    rows = [{"record": as_text(w.get("record")), "start": time(w.get("t_start")), "end": time(w.get("t_end")),
-             "error": err(w.get("nrmse"))} for w in r.get("worst_windows", [])]
+def worst(r: Report) -> dict | None:
+    time = lambda t: NA if finite(t) is None else f"{t:.1f}"  # noqa: E731
+    rows = [{"record": w["record"], "start": time(w["t_start"]), "end": time(w["t_end"]), "error": err(w["nrmse"])}
+            for w in r.worst_windows]
     if not rows:
         return None
     return _section("worst", rows=rows, defs=footnote(r, [], [(
@@ -355,56 +334,49 @@ def worst(r: dict) -> dict | None:
 _PARAM_ITEM = re.compile(r"\s*([^,\[\]]+?)\s*\[([^\[\]]*)\]\s*(?:,|$)")
 
 
-def _catalogue_params(params: Any, units: Mapping, notes: dict) -> dict:
-    """A catalogue row's parameters: values (``name = value [unit]``), names with their units, or a text."""
-    if isinstance(params, Mapping):
-        return {"kind": "values", "entries": param_items(params, units, notes)}
-    if isinstance(params, (list, tuple)):
-        return {"kind": "names", "entries": [{"name": str(p), "unit": unit(p, units, notes) if unit(p, units) else None}
-                                           for p in params if p is not None]}
-    items = _PARAM_ITEM.findall(params) if isinstance(params, str) else []
+def _catalogue_params(params: str, notes: dict) -> dict:
+    """A catalogue row's parameters: names with their units (``name [unit], ...``), or a text."""
+    items = _PARAM_ITEM.findall(params)
     if not items or "".join(_PARAM_ITEM.sub("", params).split()):
-        return {"kind": "text", "text": as_text(params)}
+        return {"kind": "text", "text": params}
     return {"kind": "names", "entries": [{"name": n, "unit": unit(n, {n: u}, notes)} for n, u in items]}
 
 
-def catalogue(r: dict) -> dict | None:
-    rows, notes, units = [], {}, r.get("units", {})
-    has_applies = any("applies" in c for c in r.get("catalogue", []))
-    for c in r.get("catalogue", []):
-        a = c.get("applies")
+def catalogue(r: Report) -> dict | None:
+    rows, notes = [], {}
+    has_applies = any("applies" in c for c in r.catalogue)
+    for c in r.catalogue:
+        a = c.get("applies", "")
         applies = None if not has_applies else (
-            {"kind": "yes"} if a is True or (isinstance(a, str) and a.strip().lower() == "yes") else
-            {"kind": "na"} if a in (None, "") else {"kind": "no"} if a is False else {"kind": "why", "why": str(a)})
-        rows.append({"name": as_text(c.get("name")), "physics": as_text(c.get("physics")),
-                     "params": _catalogue_params(c.get("parameters"), units, notes), "enters": as_text(c.get("enters")),
-                     "source": as_text(c.get("source")), "applies": applies})
+            {"kind": "yes"} if a.strip().lower() == "yes" else {"kind": "na"} if not a else {"kind": "why", "why": a})
+        rows.append({"name": c["name"], "physics": c["physics"], "params": _catalogue_params(c["parameters"], notes),
+                     "enters": c["enters"], "source": c["source"], "applies": applies})
     if not rows:
         return None
     return _section("catalogue", rows=rows, has_applies=has_applies, unit_notes=unit_notes(notes))
 
 
-def separating(r: dict) -> dict | None:
+def separating(r: Report) -> dict | None:
     """The manoeuvres that would best tell the two leading candidates apart, best first (the top eight), and the
     records in hand scored the same way."""
-    sep = r.get("separating_maneuver") or {}
-    menu = [m for m in sep.get("menu") or [] if isinstance(m, Mapping)]
+    sep = r.separating_maneuver
+    menu = sep["menu"] if sep else []
     if not menu:
         return None
     row = lambda m, what: {"what": what, "S": num(finite(m.get("S")), 2), "channel": as_text(m.get("channel")),  # noqa: E731
                            "max": num(finite(m.get("max")), 2), "diverged": as_text(m.get("diverged"))}
     rows = [row(m, f"{as_text(m.get('maneuver'))} to {as_text(m.get('side'))}, "
                    f"{100 * (finite(m.get('speed_U0')) or 0):.0f} % of the service speed") for m in menu[:8]]
-    recorded = [row(m, as_text(m.get("record"))) for m in sep.get("recorded") or [] if isinstance(m, Mapping)]
-    return _section("separating", pair=names(sep.get("pair") or []), text=as_text(sep.get("text")), rows=rows,
-                    recorded=recorded, scale=[f"{c}: {num(finite(v), 3)}" for c, v in (sep.get("scale") or {}).items()])
+    recorded = [row(m, m["record"]) for m in sep["recorded"]]
+    return _section("separating", pair=sep["pair"], text=sep["text"], rows=rows, recorded=recorded,
+                    scale=[f"{c}: {num(finite(v), 3)}" for c, v in sep["scale"].items()])
 
 
-def rudder_residual(r: dict) -> dict | None:
+def rudder_residual(r: Report) -> dict | None:
     """Mean residual N' and Y' (x 1e4) of the training rows per rudder-angle bin, baseline and final model."""
-    rr = r.get("rudder_residual") or {}
+    rr = r.rudder_residual or {}
     fits = [(label, rr[k]) for k, label in (("baseline", "baseline"), ("final", "final model"))
-            if isinstance(rr.get(k), Mapping) and rr[k].get("bins")]
+            if rr.get(k) and rr[k].get("bins")]
     if not fits:
         return None
     scaled = lambda x: num(None if finite(x) is None else 1e4 * finite(x), 3)  # noqa: E731
@@ -417,81 +389,76 @@ def rudder_residual(r: dict) -> dict | None:
                     spread=[scaled(f.get("N_spread")) for _, f in fits], rms=[scaled(f.get("N_rms")) for _, f in fits])
 
 
-def notes(r: dict) -> dict | None:
-    return _section("notes", entries=r["notes"]) if r.get("notes") else None
+def notes(r: Report) -> dict | None:
+    return _section("notes", entries=r.notes) if r.notes else None
 
 
-def _param_table(r: dict) -> dict | None:
+def _param_table(r: Report) -> dict | None:
     """Baseline and final parameters side by side, each with its unit."""
-    b, f = (r.get(k, {}).get("parameters") or {} for k in ("baseline", "final"))
+    b, f = r.baseline["parameters"], r.final["parameters"]
     if not b and not f:
         return None
-    units = r.get("units", {})
-    bk, fk = {str(k): v for k, v in b.items()}, {str(k): v for k, v in f.items()}
+    units = r.units or {}
     cell = lambda d, n: param_value(d[n]) if n in d else None  # noqa: E731 -- None: the model has no such parameter
-    rows = [{"name": n, "cells": [cell(bk, n)] + ([cell(fk, n)] if f else []),
-             "unit": None if units.get(n) in (None, "") else str(units[n])} for n in dict.fromkeys([*bk, *fk])]
-    return {"final": bool(f), "rows": rows, "conventions": (r.get("conventions") or "").strip()}
+    rows = [{"name": n, "cells": [cell(b, n)] + ([cell(f, n)] if f else []),
+             "unit": None if units.get(n) in (None, "") else units[n]} for n in dict.fromkeys([*b, *f])]
+    return {"final": bool(f), "rows": rows, "conventions": (r.conventions or "").strip()}
 
 
-def data(r: dict) -> dict | None:
-    rows = [{"label": label, "text": r[k]} for k, label in (("vessel", "Vessel"), ("model", "Model"),
-                                                             ("structure", "Sample structure")) if r.get(k)]
-    if r.get("mode"):
-        rows.append({"label": "Validation", "text": MODES.get(r["mode"], r["mode"])})
-    rows += [{"label": label, "list": r[k]} for k, label in (("train", "Trained on"), ("validate", "Validated on"))
-             if r.get(k)]
-    if r.get("depths_h_T"):
+def data(r: Report) -> dict | None:
+    rows = [{"label": label, "text": v} for v, label in ((r.vessel, "Vessel"), (r.model, "Model"),
+                                                         (r.structure, "Sample structure")) if v]
+    if r.mode:
+        rows.append({"label": "Validation", "text": MODES.get(r.mode, r.mode)})
+    rows += [{"label": label, "list": v} for v, label in ((r.train, "Trained on"), (r.validate, "Validated on")) if v]
+    if r.depths_h_T:
         rows.append({"label": "Water depth (h/T, depth over draft)", "list": [
             f"{k}: h/T = {num(v, 3)}" if finite(v) is not None else f"{k}: not given (deep water)"
-            for k, v in r["depths_h_T"].items()]})
-    fin = r.get("final", {}).get("effects")
-    if isinstance(fin, list):
-        rows.append({"label": "Final model adds", "effects": names(fin)})
+            for k, v in r.depths_h_T.items()]})
+    rows.append({"label": "Final model adds", "effects": r.final["effects"]})
     table = _param_table(r)
     if table:
         rows.append({"label": "Parameters", "params": table})
-    return _section("data", rows=rows) if rows else None
+    return _section("data", rows=rows)
 
 
-def definitions(r: dict) -> dict | None:
-    d = [{"term": k, "text": v} for k, v in r.get("definitions", {}).items() if isinstance(v, str) and v.strip()]
+def definitions(r: Report) -> dict | None:
+    d = [{"term": k, "text": v} for k, v in (r.definitions or {}).items() if v.strip()]
     return _section("definitions", entries=d) if d else None
 
 
-def provenance(r: dict) -> dict | None:
-    p = r.get("provenance", {})
+def provenance(r: Report) -> dict | None:
+    p = r.provenance
     if not p:
         return None
-    s = lambda k: as_text(p.get(k)).strip()  # noqa: E731
-    rev = s("revision") + (" (with local changes to tracked files)" if s("revision") and p.get("modified") is True
+    s = lambda k: as_text(p[k]).strip()  # noqa: E731
+    rev = s("revision") + (" (with local changes to tracked files)" if s("revision") and p["modified"] is True
                            else "")
     rows = [{"label": label, "text": val, "code": code} for label, val, code in (
         ("Package", f"{s('package')} {s('version')}".strip(), False),
         ("Git revision", rev or "not a git checkout", True), ("Command line", s("command"), True),
         ("Date (UTC)", s("date"), False)) if val]
-    recs = [{k: as_text(x.get(k)) for k in ("role", "name", "sha256", "sha256_of")} for x in p.get("records", [])]
+    recs = [{k: x[k] for k in ("role", "name", "sha256", "sha256_of")} for x in p["records"]]
     return _section("provenance", rows=rows, records=recs)
 
 
-def uncertainty(r: dict) -> dict | None:
+def uncertainty(r: Report) -> dict | None:
     from .html_uncertainty import uncertainty_view
 
     body = uncertainty_view(r)
     return _section("uncertainty", **body) if body else None
 
 
-def view(report: Any, figure_bytes: Mapping | None = None) -> dict:
+def view(r: Report, figure_bytes: Mapping | None = None) -> dict:
     """The page's view data: title, footer, the summary line, the verdict, the divergence box, the conventions,
     then each section with something to show (``sections``, in page order, each with its ``id`` and ``title``)
     and the table of contents built from them."""
-    r = normalise(report)
     figs = {str(k): v for k, v in figure_bytes.items()} if isinstance(figure_bytes, Mapping) else {}
     sections = [s for s in (ladder(r), ranking(r), errors(r), maneuvers(r), uncertainty(r), identifiability(r),
                             figures(r, figs), separating(r), rudder_residual(r), worst(r), catalogue(r), notes(r), data(r), definitions(r),
                             provenance(r)) if s is not None]
-    return {"title": r.get("title") or "Model doctor report", "created_by": r.get("created_by") or "",
+    return {"title": r.title or "Model doctor report", "created_by": r.created_by,
             "summary": summary(r), "verdict": verdict(r), "divergence": divergence(r),
-            "conventions": (r.get("conventions") or "").strip(), "sections": sections,
+            "conventions": (r.conventions or "").strip(), "sections": sections,
             "contents": [{"id": "verdict", "title": "Verdict"}] + [{"id": s["id"], "title": s["title"]}
                                                                    for s in sections]}

@@ -1,7 +1,8 @@
 """The doctor's report written: the figures, ``report.json`` and ``report.html`` of a finished diagnosis
-(:func:`write_report`), with what goes into them beside the ranking and the ladder (:mod:`.diagnose`): each
-record's replays, the worst windows, the manoeuvre metrics of each candidate, the conventions and definitions,
-the catalogue and the provenance (package, git revision, command line, date, each record's sha256).
+(:func:`write_report`: a :class:`.report_schema.Report`, serialised once), with what goes into them beside the
+ranking and the ladder (:mod:`.diagnose`): each record's replays, the worst windows, the manoeuvre metrics of each
+candidate, the conventions and definitions, the catalogue and the provenance (package, git revision, command line,
+date, each record's sha256).
 
 ``doctor`` is a finished :class:`.diagnose.Doctor` (not imported here: the diagnosis is the layer above)."""
 from __future__ import annotations
@@ -11,6 +12,7 @@ import math
 import numpy as np
 
 from ..identify.with_effects import CHANNELS
+from .report_schema import Report
 
 
 def _running_error(meas, pred) -> np.ndarray | None:
@@ -124,8 +126,8 @@ def candidate_metrics(doctor, rep: dict, meas: dict, mb: dict) -> None:
 
 def write_report(doctor, out_dir, vessel: str, model: str, overwrite: bool = False) -> dict:
     """Write ``report.json``, ``report.html`` and the figures (``figures/*.png``) into ``out_dir``; returns the
-    report. Refuses to replace an existing report unless ``overwrite``."""
-    import json
+    report as ``report.json`` holds it (:meth:`.report_schema.Report.to_dict`). Refuses to replace an existing
+    report unless ``overwrite``."""
     from pathlib import Path
 
     from .html import render_html
@@ -143,16 +145,14 @@ def write_report(doctor, out_dir, vessel: str, model: str, overwrite: bool = Fal
     mm, uncertainty = _manoeuvres(doctor, rep, meas, pb, pf)
     _interval_figure(mm, figs, listing)
     _put_figures(out, figs)
-    html_report = {**_jsonable(rep), "title": f"Model doctor: {model} on {vessel}", "created_by":
-                   "python -m study.diagnose", "vessel": vessel, "model": model,
-                   "structure": doctor.problem.structure.name, "worst_windows": windows,
-                   "catalogue": catalogue_rows(doctor), "figures": listing, "maneuver_metrics": mm,
-                   "prediction_uncertainty": uncertainty,
-                   "conventions": CONVENTIONS, "definitions": DEFINITIONS, "provenance": provenance(doctor)}
-    (out / "report.json").write_text(json.dumps(html_report, indent=1, allow_nan=True, default=float),
-                                     encoding="utf-8")
-    (out / "report.html").write_text(render_html(html_report, figs), encoding="utf-8")
-    return html_report
+    report = Report(**_jsonable(rep), title=f"Model doctor: {model} on {vessel}",
+                    created_by="python -m study.diagnose", vessel=vessel, model=model,
+                    structure=doctor.problem.structure.name, worst_windows=windows, catalogue=catalogue_rows(doctor),
+                    figures=listing, maneuver_metrics=mm, prediction_uncertainty=uncertainty,
+                    conventions=CONVENTIONS, definitions=DEFINITIONS, provenance=provenance(doctor))
+    (out / "report.json").write_text(report.to_json(), encoding="utf-8")
+    (out / "report.html").write_text(render_html(report, figs), encoding="utf-8")
+    return report.to_dict()
 
 
 def _figures(doctor, rep: dict, meas: dict, pb: dict, pf: dict) -> tuple:

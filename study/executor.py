@@ -170,12 +170,46 @@ def run_replicated(store: ResultStore, config: dict, job: ReplicatedJob, replica
     land. A failure of the shared work fails every replicate still to compute, each with that traceback.
     ``KeyboardInterrupt`` / ``SystemExit`` propagate and leave no record of the chunk in progress.
     """
+    _check_arguments(resume, replicates)
+    replicated = replicates > 1
+    code = code if code is not None else code_fp.code_fingerprint(config)
+    out, pending, before = _finished_replicates(store, config, replicates, seed, code, force, resume)
+    shared: Any = None  # None: not prepared yet; a dict: every replicate's result; a str: its failure
+    prepared, shared_time = False, 0.0
+    chunk, i = 1, 0
+    while i < len(pending):
+        batch, i = pending[i:i + chunk], i + chunk
+        claims = []
+        try:
+            _claim_batch(store, config, batch, code, force, resume, wait, out, before, claims)
+            todo = [rep for rep in batch if out[rep.index] is None]
+            if not todo:
+                continue
+            if not prepared:
+                shared, shared_time = _prepare_shared(job)
+                prepared = True
+            # a replicate's wall time: its own share of the chunk and of the work shared by the job
+            took = _compute_and_write(store, config, job, todo, shared, shared_time / max(1, len(pending)), seed,
+                                      code, replicated, out, before)
+            chunk = max(1, int(_chunk_seconds() / max(took / len(todo), 1e-3)))
+        finally:
+            for claim in claims:
+                claim.release()
+    return out
+
+
+def _check_arguments(resume: str, replicates) -> None:
+    """Refuse a ``resume`` mode or a number of ``replicates`` that :func:`run_replicated` does not know."""
     if resume not in RESUME_MODES:
         raise ValueError(f"resume={resume!r}: expected one of {RESUME_MODES}")
     if not (isinstance(replicates, int) and not isinstance(replicates, bool) and replicates >= 1):
         raise ValueError(f"replicates={replicates!r}: expected a whole number >= 1")
-    replicated = replicates > 1
-    code = code if code is not None else code_fp.code_fingerprint(config)
+
+
+def _finished_replicates(store: ResultStore, config: dict, replicates: int, seed, code: dict, force: bool,
+                         resume: str) -> tuple[list, list, dict]:
+    """The records of the replicates already finished (``out``, None where not), the replicates still to compute
+    (``pending``) and the record each of those had (``before``, None if none)."""
     out: list = [None] * replicates
     pending, before = [], {}
     for k in range(replicates):
@@ -186,50 +220,49 @@ def run_replicated(store: ResultStore, config: dict, job: ReplicatedJob, replica
         else:
             pending.append(rep)
             before[k] = rec
-    shared: Any = None  # None: not prepared yet; a dict: every replicate's result; a str: its failure
-    prepared, shared_time, n_done = False, 0.0, 0
-    chunk, i = 1, 0
-    while i < len(pending):
-        batch, i = pending[i:i + chunk], i + chunk
-        claims = []
-        try:
-            for rep in batch:
-                claim = store.claim(rep.run_id)
-                if not claim.acquire(wait=wait):
-                    out[rep.index] = {"run_id": rep.run_id, "status": "claimed", "config": config,
-                                      "claimed_by": claim.holder(), "replicate": rep.index}
-                    continue
-                claims.append(claim)
-                existing = store.read(rep.run_id)  # again: the process we waited for may have finished it
-                fresh = existing is not None and _when(existing) != _when(before[rep.index])
-                if _reusable(existing, code, resume) and (fresh or not force):
-                    out[rep.index] = {**existing, "resumed": True}
-                    continue
-                before[rep.index] = existing
-            todo = [rep for rep in batch if out[rep.index] is None]
-            if not todo:
-                continue
-            if not prepared:
-                t0 = time.perf_counter()
-                try:
-                    shared = job.prepare()
-                except Exception:
-                    shared = traceback.format_exc()
-                prepared, shared_time = True, time.perf_counter() - t0
-            t0, started = time.perf_counter(), now_iso()
-            results = _compute_chunk(job, todo, shared)
-            took = time.perf_counter() - t0
-            n_done += len(todo)
-            for rep, (res, own) in zip(todo, results):
-                # a replicate's wall time: its own share of the chunk and of the work shared by the job
-                wall = own + shared_time / max(1, len(pending))
-                record, artefacts = _record(rep, config, seed, started, res, wall, code, replicated)
-                out[rep.index] = _write(store, record, artefacts, before[rep.index])
-            chunk = max(1, int(_chunk_seconds() / max(took / len(todo), 1e-3)))
-        finally:
-            for claim in claims:
-                claim.release()
-    return out
+    return out, pending, before
+
+
+def _claim_batch(store: ResultStore, config: dict, batch: list, code: dict, force: bool, resume: str, wait: bool,
+                 out: list, before: dict, claims: list) -> None:
+    """Claim each replicate of ``batch`` (appended to ``claims``, for the caller to release); fill ``out`` for
+    those claimed by another live process (when not waiting) or finished meanwhile by one we waited for."""
+    for rep in batch:
+        claim = store.claim(rep.run_id)
+        if not claim.acquire(wait=wait):
+            out[rep.index] = {"run_id": rep.run_id, "status": "claimed", "config": config,
+                              "claimed_by": claim.holder(), "replicate": rep.index}
+            continue
+        claims.append(claim)
+        existing = store.read(rep.run_id)  # again: the process we waited for may have finished it
+        fresh = existing is not None and _when(existing) != _when(before[rep.index])
+        if _reusable(existing, code, resume) and (fresh or not force):
+            out[rep.index] = {**existing, "resumed": True}
+            continue
+        before[rep.index] = existing
+
+
+def _prepare_shared(job: ReplicatedJob) -> tuple[Any, float]:
+    """The job's shared work (its result, or its traceback text when it failed) and the seconds it took."""
+    t0 = time.perf_counter()
+    try:
+        shared = job.prepare()
+    except Exception:
+        shared = traceback.format_exc()
+    return shared, time.perf_counter() - t0
+
+
+def _compute_and_write(store: ResultStore, config: dict, job: ReplicatedJob, todo: list, shared: Any,
+                       shared_wall: float, seed, code: dict, replicated: bool, out: list, before: dict) -> float:
+    """Compute the replicates ``todo`` and write their records (into ``out`` too); the seconds the computing
+    took. ``shared_wall``: each replicate's share of the shared work's time."""
+    t0, started = time.perf_counter(), now_iso()
+    results = _compute_chunk(job, todo, shared)
+    took = time.perf_counter() - t0
+    for rep, (res, own) in zip(todo, results):
+        record, artefacts = _record(rep, config, seed, started, res, own + shared_wall, code, replicated)
+        out[rep.index] = _write(store, record, artefacts, before[rep.index])
+    return took
 
 
 def _compute_chunk(job: ReplicatedJob, todo: list, shared: Any) -> list[tuple[Any, float]]:

@@ -355,35 +355,34 @@ def _validate(replay, data: FileData, channels, L: float, keep_traces: bool, met
     metrics["val_nrmse_mean"] = float(np.mean(errs)) if errs else math.nan
 
 
-def run_on_records(conf: dict, data: FileData) -> dict:
-    """One run on the records ``data`` (from :func:`load`) with the composed configuration ``conf``; the same
-    result dict as ``study.pipeline.run_study``."""
+def _components(conf: dict):
+    """The run's known vessel, model, structure, estimator configuration and effects, as a tuple; or the reason
+    the run is skipped (a str)."""
     from .identify.estimators import make_estimator
-    from .identify.fit import identify
     from .identify.models import make_model
     from .identify.structures import make_structure
     from .run_common import estimator_config, known_vessel, skip_reason
     from .sim.effects import NotApplicable
 
-    timings = {"read": data.seconds}
-    seed = int(conf.get("seed", 0))
     try:
         base = known_vessel(conf)
     except NotApplicable as e:
-        return _skipped(str(e))
+        return str(e)
     model = make_model(conf["model"], base)
     structure = make_structure(conf["structure"])
     est_cfg = estimator_config(conf)
     why = skip_reason(model, structure, make_estimator(est_cfg))
     effects = tuple(conf["model"].get("effects") or [])
     if why:
-        return _skipped(why)
+        return why
     if effects and (model.type != "kind" or structure.simulates):
-        return _skipped("model.effects need a force model (type: kind) and a regression structure")
+        return "model.effects need a force model (type: kind) and a regression structure"
+    return base, model, structure, est_cfg, effects
+
+
+def _records_metrics(data: FileData) -> dict:
+    """The metrics that say which records the run read and how they were checked."""
     train = data.train.records
-    notes = ["data from files: nothing simulated; environment, noise, maneuvers and sim do not apply and are not in "
-             "this run's configuration; no truth (params truth empty, no drift metrics)"]
-    notes += _depth_notes(base, conf, data)
     metrics = {"data_source": "files", "train_records": float(len(train)),
                "n_samples": int(sum(len(r.data) for r in train)),
                "train_files": json.dumps([str(p) for p in data.train.paths]),
@@ -391,55 +390,65 @@ def run_on_records(conf: dict, data: FileData) -> dict:
                                                (": passed" if data.checks != "off" else ""))}
     if data.validate is not None:
         metrics["validate_files"] = json.dumps([str(p) for p in data.validate.paths])
-    artefacts = {}
-    if effects:  # the doctor's identification (variable projection with the effects), as in a simulated run
-        from .identify.with_effects import EffectsProblem
+    return metrics
 
-        t0 = time.perf_counter()
-        pb = EffectsProblem(base.cfg, conf["model"], train, conf["structure"], names=data.train.names)
-        fit = pb.fit(effects, refine=True)
-        timings["fit"] = time.perf_counter() - t0
-        free = pb.free_coefficients(effects)  # coefficient -> equation (the model's and those effects free)
-        freed = {c: fit.coefs[c] for c in free if c in fit.coefs}
-        params = [{"equation": free.get(k, "effect"), "name": k, "estimate": float(v), "truth": None,
-                   "truth_kind": TRUTH_KIND}
-                  for k, v in {**pb.describe(fit), **freed}.items() if isinstance(v, (int, float))]
-        metrics.update(training_error=fit.training_error, effect_evaluations=fit.evaluations)
 
-        def replay(rec, name):
-            return pb.predict(fit, rec.data, pb.info_for(rec.data, rec.meta, name))
-    elif model.type == "kind" and not model.equations:  # model=known: nothing to identify, the config replayed
-        params, estimates, replay = [], {}, None
-        metrics["n_params"] = 0
-        notes.append("nothing identified: the model has no free coefficients (the vessel config's model is "
-                     "replayed as it is)")
-    else:
-        ident = identify(model, structure, est_cfg, [r.data for r in train], seed=seed,
-                         progress=bool(conf.get("progress", False)))
-        timings.update(ident.timings)
-        artefacts.update(ident.artefacts)
-        ref = {p["name"]: p["truth"] for p in ident.params}
-        # identify() measured against the vessel config as if it were a truth: those figures are dropped (the
-        # term's weight on the user's records, term_scale, stays)
-        params = [{**{k: v for k, v in p.items() if k != "scaled_error"}, "truth": None,
-                   "truth_kind": p["truth_kind"] if str(p.get("truth_kind", "")).startswith("candidate")
-                   else TRUTH_KIND} for p in ident.params]
-        drop = ("drift_median", "drift_max", "drift_mean", "truth_exact", "prior_is_truth")  # about a truth
-        metrics.update({k: v for k, v in ident.metrics.items()
-                        if k not in drop and not k.startswith(("drift_", "scaled_drift_"))})
-        rel = [abs(v - ref[k]) / abs(ref[k]) for k, v in ident.estimates.items()
-               if v is not None and np.isfinite(v) and ref.get(k)]
-        metrics["config_rel_diff_median"] = float(np.median(rel)) if rel else math.nan
-        metrics["config_rel_diff_max"] = float(np.max(rel)) if rel else math.nan
-        estimates = ident.estimates
-        bad = sorted(k for k, v in estimates.items() if v is None or not np.isfinite(v))
-        replay = None
-        if bad:
-            metrics["val_skipped"] = 1.0
-            metrics["val_skipped_reason"] = f"no finite estimate of {bad}: the identified model cannot be simulated"
-    metrics["notes"] = "; ".join(notes)
+def _identify_with_effects(base, conf: dict, data: FileData, effects: tuple, metrics: dict, timings: dict):
+    """The doctor's identification (variable projection with the effects), as in a simulated run: the params
+    rows and ``replay(record, name)`` of the fitted model."""
+    from .identify.with_effects import EffectsProblem
 
     t0 = time.perf_counter()
+    pb = EffectsProblem(base.cfg, conf["model"], data.train.records, conf["structure"], names=data.train.names)
+    fit = pb.fit(effects, refine=True)
+    timings["fit"] = time.perf_counter() - t0
+    free = pb.free_coefficients(effects)  # coefficient -> equation (the model's and those effects free)
+    freed = {c: fit.coefs[c] for c in free if c in fit.coefs}
+    params = [{"equation": free.get(k, "effect"), "name": k, "estimate": float(v), "truth": None,
+               "truth_kind": TRUTH_KIND}
+              for k, v in {**pb.describe(fit), **freed}.items() if isinstance(v, (int, float))]
+    metrics.update(training_error=fit.training_error, effect_evaluations=fit.evaluations)
+
+    def replay(rec, name):
+        return pb.predict(fit, rec.data, pb.info_for(rec.data, rec.meta, name))
+    return params, replay
+
+
+def _identify_without_truth(model, structure, est_cfg: dict, conf: dict, data: FileData, seed: int, metrics: dict,
+                            timings: dict, artefacts: dict):
+    """The model identified as in a simulated run, with what that run measures against a truth dropped (the
+    vessel config is no truth): the params rows and the estimates."""
+    from .identify.fit import identify
+
+    ident = identify(model, structure, est_cfg, [r.data for r in data.train.records], seed=seed,
+                     progress=bool(conf.get("progress", False)))
+    timings.update(ident.timings)
+    artefacts.update(ident.artefacts)
+    ref = {p["name"]: p["truth"] for p in ident.params}
+    # identify() measured against the vessel config as if it were a truth: those figures are dropped (the
+    # term's weight on the user's records, term_scale, stays)
+    params = [{**{k: v for k, v in p.items() if k != "scaled_error"}, "truth": None,
+               "truth_kind": p["truth_kind"] if str(p.get("truth_kind", "")).startswith("candidate")
+               else TRUTH_KIND} for p in ident.params]
+    drop = ("drift_median", "drift_max", "drift_mean", "truth_exact", "prior_is_truth")  # about a truth
+    metrics.update({k: v for k, v in ident.metrics.items()
+                    if k not in drop and not k.startswith(("drift_", "scaled_drift_"))})
+    rel = [abs(v - ref[k]) / abs(ref[k]) for k, v in ident.estimates.items()
+           if v is not None and np.isfinite(v) and ref.get(k)]
+    metrics["config_rel_diff_median"] = float(np.median(rel)) if rel else math.nan
+    metrics["config_rel_diff_max"] = float(np.max(rel)) if rel else math.nan
+    estimates = ident.estimates
+    bad = sorted(k for k, v in estimates.items() if v is None or not np.isfinite(v))
+    if bad:
+        metrics["val_skipped"] = 1.0
+        metrics["val_skipped_reason"] = f"no finite estimate of {bad}: the identified model cannot be simulated"
+    return params, estimates
+
+
+def _validate_or_skip(conf: dict, data: FileData, model, base, estimates: dict, replay, metrics: dict,
+                      artefacts: dict):
+    """The validation records replayed (by ``replay``, else the model with ``estimates``), or the metrics that
+    say why not."""
     if data.validate is None:
         metrics["val_skipped"] = 1.0
         metrics["val_skipped_reason"] = ("no validation records (validate=null): no held-out replay was made; pass "
@@ -450,5 +459,36 @@ def run_on_records(conf: dict, data: FileData) -> dict:
             replay = _replayer(model, base, estimates, data.validate.records, data.validate.names)
         keep = bool((conf.get("artefacts") or {}).get("traces", True))
         _validate(replay, data, model.channels, base.L, keep, metrics, artefacts)
+
+
+def run_on_records(conf: dict, data: FileData) -> dict:
+    """One run on the records ``data`` (from :func:`load`) with the composed configuration ``conf``; the same
+    result dict as ``study.pipeline.run_study``."""
+    timings = {"read": data.seconds}
+    seed = int(conf.get("seed", 0))
+    parts = _components(conf)
+    if isinstance(parts, str):
+        return _skipped(parts)
+    base, model, structure, est_cfg, effects = parts
+    notes = ["data from files: nothing simulated; environment, noise, maneuvers and sim do not apply and are not in "
+             "this run's configuration; no truth (params truth empty, no drift metrics)"]
+    notes += _depth_notes(base, conf, data)
+    metrics = _records_metrics(data)
+    artefacts = {}
+    estimates, replay = {}, None
+    if effects:  # the doctor's identification, as in a simulated run
+        params, replay = _identify_with_effects(base, conf, data, effects, metrics, timings)
+    elif model.type == "kind" and not model.equations:  # model=known: nothing to identify, the config replayed
+        params = []
+        metrics["n_params"] = 0
+        notes.append("nothing identified: the model has no free coefficients (the vessel config's model is "
+                     "replayed as it is)")
+    else:
+        params, estimates = _identify_without_truth(model, structure, est_cfg, conf, data, seed, metrics, timings,
+                                                    artefacts)
+    metrics["notes"] = "; ".join(notes)
+
+    t0 = time.perf_counter()
+    _validate_or_skip(conf, data, model, base, estimates, replay, metrics, artefacts)
     timings["validate"] = time.perf_counter() - t0
     return {"metrics": metrics, "params": params, "timings": timings, "artefacts": artefacts}

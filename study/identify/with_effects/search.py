@@ -77,7 +77,109 @@ def fit(pb, effects, start: dict | None = None, grid: bool = True, fixed=(), ref
     best.evaluations = count
     return best
 
+
+class _Objectives:
+    """The search's objectives over the free nonlinear parameters ``names`` of a variant (inside their box
+    ``lo`` .. ``hi``), and how many times they were evaluated (``count``)."""
+
+    def __init__(self, pb, effects, held: dict, spec: list):
+        self.pb, self.effects, self.held = pb, effects, held  # held: the variant and the fixed parameters
+        self.names = [s[0] for s in spec]
+        self.lo = np.array([s[1] for s in spec])
+        self.hi = np.array([s[2] for s in spec])
+        self.count = 0
+
+    def outer_of(self, x) -> dict:
+        """The effects' nonlinear parameters at the point ``x`` (clipped into the box)."""
+        return {**self.held, **dict(zip(self.names, (float(v) for v in np.clip(x, self.lo, self.hi))))}
+
+    def equation_error(self, x, model=True) -> float:
+        """The equation error at ``x`` (with ``model`` False, the model's coefficients held at the vessel
+        config's values); 1e6 where it cannot be computed."""
+        self.count += 1
+        try:
+            j = self.pb.solve(self.effects, self.outer_of(x), model=model)[1]
+            return j if np.isfinite(j) else 1e6
+        except (ValueError, np.linalg.LinAlgError, FloatingPointError):
+            return 1e6
+
+    def replay_error(self, x) -> float:
+        """The training records' replay error at ``x`` (output error; the linear unknowns by equation error);
+        1e6 where it cannot be computed."""
+        self.count += 1
+        pb = self.pb
+        outer = self.outer_of(x)
+        try:
+            coefs = pb.solve(self.effects, outer)[0]
+        except (ValueError, np.linalg.LinAlgError):
+            return 1e6
+        f = Fit(self.effects, outer, coefs, 0.0)
+        errs = {i: record_errors(df, pb.predict(f, df, pb.infos[i]), pb.floors)
+                for i, df in enumerate(pb.records)}
+        e = validation_error(errs)
+        return e if np.isfinite(e) else 1e6
+
+
+def _start_points(obj: _Objectives, new: list, known: dict, grid: bool) -> list:
+    """The search's start points: with ``grid``, every point of the grids of the parameters ``new`` (the others
+    at their ``known`` values); else one point (the known values, the middle of the box for the others)."""
+    if grid and new:
+        pts = []
+        for combo in itertools.product(*[s[3] for s in new]):
+            x = dict(known)
+            x.update({s[0]: g for s, g in zip(new, combo)})
+            pts.append(np.array([x[n] for n in obj.names]))
+        return pts
+    return [np.array([known.get(n, 0.5 * (a + b)) for n, a, b in zip(obj.names, obj.lo, obj.hi)])]
+
+
+def _nelder_mead(fun, x0, steps, lo, hi, evals: int, fatol: float, args=()):
+    """A bounded Nelder-Mead search from ``x0`` whose first simplex steps ``steps`` along each axis (backwards
+    where a step forwards would leave the box)."""
+    simplex = np.vstack([x0] + [np.clip(x0 + np.eye(len(x0))[i] * steps[i] *
+                                        (1 if x0[i] + steps[i] <= hi[i] else -1), lo, hi)
+                                for i in range(len(x0))])
+    return optimize.minimize(fun, x0, args=args, method="Nelder-Mead", bounds=list(zip(lo, hi)),
+                             options={"maxfev": evals, "xatol": 1e-4 * float(np.max(hi - lo)), "fatol": fatol,
+                                      "initial_simplex": simplex})
+
+
+def _local(obj: _Objectives, x0, steps, evals: int, model=True):
+    """The local search on the equation error from ``x0``: its end point (in the box) and error."""
+    res = _nelder_mead(obj.equation_error, x0, steps, obj.lo, obj.hi, evals, 1e-7, args=(model,))
+    return np.clip(res.x, obj.lo, obj.hi), float(res.fun)
+
+
+def _search_equation_error(obj: _Objectives, pts: list, steps, max_evals: int, locate: bool):
+    """The best point of the equation error: the best start point polished by a local search (kept only if it
+    improves). With ``locate``, a start point is added first: the best one with the model's coefficients held
+    at the vessel config's values, polished the same way."""
+    if locate:
+        # an identified model absorbs most of a wrong effect: its training error is flat except in a basin a
+        # few % of U0 wide around the truth (measured: a current on an identified KVLCC2 hull), which a grid
+        # misses. With the model's coefficients held at the vessel config's values (its prior) the basin is
+        # wide: the effect is located that way first, then everything is identified from there.
+        pv = [obj.equation_error(p, False) for p in pts]
+        xp, _ = _local(obj, pts[int(np.argmin(pv))], steps, max_evals, False)
+        pts = pts + [xp]
+    vals = [obj.equation_error(p) for p in pts]
+    x0 = pts[int(np.argmin(vals))]
+    xb, fb = _local(obj, x0, steps, max_evals)
+    return xb if fb <= min(vals) else x0
+
+
+def _refine_on_replays(obj: _Objectives, best, steps, max_evals: int):
+    """``best`` polished on the training records' replay error (a Nelder-Mead search with a simplex of a quarter
+    of the first one's steps), kept only if it improves."""
+    r2 = _nelder_mead(obj.replay_error, best, 0.25 * steps, obj.lo, obj.hi, max_evals, 1e-6)
+    if r2.fun < obj.replay_error(best):
+        return np.clip(r2.x, obj.lo, obj.hi)
+    return best
+
+
 def _fit_variant(pb, effects, variant, start, grid, fixed, refine, max_evals) -> Fit:
+    """One variant of ``effects`` fitted (the arguments as for :func:`fit`): the equation error searched from
+    the start points, then optionally refined on the replay error."""
     spec = pb.outer_params(effects)
     start = dict(start or {})
     fixed_vals = {n: start[n] for n in fixed if n in start}
@@ -86,80 +188,17 @@ def _fit_variant(pb, effects, variant, start, grid, fixed, refine, max_evals) ->
         vals = {**variant, **fixed_vals}
         coefs, J, rss = pb.solve(effects, vals)
         return Fit(effects, vals, coefs, J, rss, 1)
-    names = [s[0] for s in spec]
-    lo = np.array([s[1] for s in spec])
-    hi = np.array([s[2] for s in spec])
-    count = [0]
-
-    def outer_of(x):
-        return {**variant, **fixed_vals, **dict(zip(names, (float(v) for v in np.clip(x, lo, hi))))}
-
-    def J(x, model=True):
-        count[0] += 1
-        try:
-            j = pb.solve(effects, outer_of(x), model=model)[1]
-            return j if np.isfinite(j) else 1e6
-        except (ValueError, np.linalg.LinAlgError, FloatingPointError):
-            return 1e6
-
-    known = {n: float(start[n]) for n in names if isinstance(start.get(n), (int, float))}
+    obj = _Objectives(pb, effects, {**variant, **fixed_vals}, spec)
+    known = {n: float(start[n]) for n in obj.names if isinstance(start.get(n), (int, float))}
     new = [s for s in spec if s[0] not in known]
-    if grid and new:
-        pts = []
-        for combo in itertools.product(*[s[3] for s in new]):
-            x = dict(known)
-            x.update({s[0]: g for s, g in zip(new, combo)})
-            pts.append(np.array([x[n] for n in names]))
-    else:
-        pts = [np.array([known.get(n, 0.5 * (a + b)) for n, a, b in zip(names, lo, hi)])]
+    pts = _start_points(obj, new, known, grid)
     # a local search from the best start: Nelder-Mead with a simplex of half a grid step (Powell's line
     # searches span the whole box and, measured on an identified hull with a current, jump into another
     # basin)
-    steps = np.array([_half_step(s[3], a, b) for s, a, b in zip(spec, lo, hi)])
-
-    def local(x0, model=True, evals=max_evals):
-        simplex = np.vstack([x0] + [np.clip(x0 + np.eye(len(x0))[i] * steps[i] *
-                                            (1 if x0[i] + steps[i] <= hi[i] else -1), lo, hi)
-                                    for i in range(len(x0))])
-        res = optimize.minimize(J, x0, args=(model,), method="Nelder-Mead", bounds=list(zip(lo, hi)),
-                                options={"maxfev": evals, "xatol": 1e-4 * float(np.max(hi - lo)),
-                                         "fatol": 1e-7, "initial_simplex": simplex})
-        return np.clip(res.x, lo, hi), float(res.fun)
-
-    if pb.model_free and grid and new:
-        # an identified model absorbs most of a wrong effect: its training error is flat except in a basin a
-        # few % of U0 wide around the truth (measured: a current on an identified KVLCC2 hull), which a grid
-        # misses. With the model's coefficients held at the vessel config's values (its prior) the basin is
-        # wide: the effect is located that way first, then everything is identified from there.
-        pv = [J(p, False) for p in pts]
-        xp, _ = local(pts[int(np.argmin(pv))], False)
-        pts = pts + [xp]
-    vals = [J(p) for p in pts]
-    x0 = pts[int(np.argmin(vals))]
-    xb, fb = local(x0)
-    best = xb if fb <= min(vals) else x0
+    steps = np.array([_half_step(s[3], a, b) for s, a, b in zip(spec, obj.lo, obj.hi)])
+    best = _search_equation_error(obj, pts, steps, max_evals, bool(pb.model_free and grid and new))
     if refine:
-        def J_oe(x):
-            count[0] += 1
-            outer = outer_of(x)
-            try:
-                coefs = pb.solve(effects, outer)[0]
-            except (ValueError, np.linalg.LinAlgError):
-                return 1e6
-            f = Fit(effects, outer, coefs, 0.0)
-            errs = {i: record_errors(df, pb.predict(f, df, pb.infos[i]), pb.floors)
-                    for i, df in enumerate(pb.records)}
-            e = validation_error(errs)
-            return e if np.isfinite(e) else 1e6
-
-        simplex2 = np.vstack([best] + [np.clip(best + np.eye(len(best))[i] * 0.25 * steps[i] *
-                                               (1 if best[i] + 0.25 * steps[i] <= hi[i] else -1), lo, hi)
-                                       for i in range(len(best))])
-        r2 = optimize.minimize(J_oe, best, method="Nelder-Mead", bounds=list(zip(lo, hi)),
-                               options={"maxfev": max_evals, "xatol": 1e-4 * float(np.max(hi - lo)),
-                                        "fatol": 1e-6, "initial_simplex": simplex2})
-        if r2.fun < J_oe(best):
-            best = np.clip(r2.x, lo, hi)
-    outer = outer_of(best)
+        best = _refine_on_replays(obj, best, steps, max_evals)
+    outer = obj.outer_of(best)
     coefs, Jb, rss = pb.solve(effects, outer)
-    return Fit(effects, outer, coefs, Jb, rss, count[0])
+    return Fit(effects, outer, coefs, Jb, rss, obj.count)

@@ -1,4 +1,4 @@
-"""State estimation (study/state_estimation.py): u, v, r and their derivatives from positions and
+"""State estimation (study/state_estimation/): u, v, r and their derivatives from positions and
 heading by an EKF with an RTS smoother; the loader option ``states``; the smoothed structure's ``method: rts``;
 and the model doctor's verdict with estimated u, v, r.
 

@@ -105,3 +105,37 @@ def test_only_an_estimator_that_models_row_noise_gives_a_trust_verdict(name):
         assert est.models_row_noise
         trusted, note = verdict
         assert trusted in (True, False) and isinstance(note, str)
+
+
+def test_a_model_with_effects_is_identified_by_variable_projection():
+    """Whatever estimator a run names, a model with effects is identified by variable projection (the YAML
+    config), which skips every model without effects, and fit_problem hands it only a model with effects."""
+    from study.identify.fit import EFFECTS_ESTIMATOR, estimator_for, problem_type
+    from study.identify.models import make_model
+    from study.identify.structures import make_structure
+    from study.sim import load_vessel
+
+    assert EFFECTS_ESTIMATOR == read_config("estimator", "variable_projection")
+    vessel = load_vessel(read_config("vessel", "kvlcc2"))
+    plain = make_model(read_config("model", "mmg_hull"), vessel)
+    with_fx = make_model({**read_config("model", "mmg_hull"), "effects": ["current"]}, vessel)
+    central, oe = make_structure("central"), make_structure("output_error")
+    ls = read_config("estimator", "ls")
+    assert estimator_for(plain, ls) is ls and estimator_for(with_fx, ls) == EFFECTS_ESTIMATOR
+    assert problem_type(with_fx, central) == "effects" and problem_type(plain, central) == "regression"
+    vp = make_estimator("variable_projection")
+    assert vp.skip(with_fx, central) == (False, "")
+    assert vp.skip(plain, central)[0] and vp.skip(with_fx, oe)[0]
+    with pytest.raises(NotImplementedError, match="regression"):
+        vp.fit_problem(RegressionProblem(pd.DataFrame({"a": [1.0, 2.0]}), np.ones(2)))
+
+
+def test_a_run_without_effects_does_not_use_identification_with_effects():
+    from study.fingerprint import closure, entries
+
+    def modules(model):  # every component of a simulated run
+        conf = {"model": model, "estimator": read_config("estimator", "ls")}
+        return {m for mods, _ in entries(conf).values() for m in closure(tuple(mods))}
+
+    assert not any(m.startswith("study.identify.with_effects") for m in modules({"name": "mmg_hull"}))
+    assert "study.identify.with_effects.estimator" in modules({"name": "mmg_hull", "effects": ["current"]})

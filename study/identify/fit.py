@@ -45,6 +45,35 @@ class Identification:
     artefacts: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
     draws: dict = field(default_factory=dict)  # physical name -> posterior draws (emcee), at most MAX_DRAWS
+    vessel: object = None  # the identified model's simulation vessel when the fit makes its own (effects)
+    replay: object = None  # replay(df, meta, name) -> DataFrame or None: the fit's own replay of a record, if any
+
+
+#: the estimator of a model with effects (``conf/estimator/variable_projection.yaml``): what :func:`estimator_for`
+#: gives such a model whatever estimator the run names
+EFFECTS_ESTIMATOR = {"name": "variable_projection",
+                     "_target_": "study.identify.with_effects.estimator.VariableProjection",
+                     "params": {"refine": True, "max_evals": 100}}
+
+
+def problem_type(model, structure) -> str:
+    """The problem a run of ``model`` with ``structure`` poses: ``"effects"`` (a model with ``model.effects``),
+    ``"output_error"`` (a structure that simulates) or ``"regression"``."""
+    if getattr(model, "effects", ()):
+        return "effects"
+    return "output_error" if structure.simulates else "regression"
+
+
+def estimator_for(model, estimator_cfg: dict) -> dict:
+    """The estimator config a run of ``model`` is identified with: ``estimator_cfg``, except for a model with
+    effects, which only variable projection identifies (:data:`EFFECTS_ESTIMATOR`, unless ``estimator_cfg`` is
+    already an estimator of that problem type). The run's configuration, and so its run id, keeps the estimator
+    it names."""
+    if not getattr(model, "effects", ()):
+        return estimator_cfg
+    if "effects" in make_estimator(estimator_cfg).problem_types:
+        return estimator_cfg
+    return EFFECTS_ESTIMATOR
 
 
 def regression_rows(model, structure, records, candidates: int | None = None):
@@ -213,24 +242,74 @@ class _Fit:
     samples: dict = field(default_factory=dict)
     bias_sd: dict = field(default_factory=dict)
     central_rows: dict | None = None
+    truth: dict = field(default_factory=dict)  # {name: (truth or None, truth kind)} of rows the model's truth lacks
+    vessel: object = None
+    replay: object = None
 
 
-def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, progress: bool = False) -> Identification:
-    """Identify ``model`` from ``records`` with the structure and the estimator config (see module doc)."""
+def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, progress: bool = False,
+             truth_vessel=None) -> Identification:
+    """Identify ``model`` from ``records`` with the structure and the estimator config (see module doc).
+
+    ``truth_vessel``: the vessel a simulated run's records come from; its environment is the truth of a model's
+    effects (None: no truth for them)."""
     truth, truth_how, exact = model.truth()
-    fit_problem = fit_output_error if structure.simulates else fit_regression
-    fit = fit_problem(model, structure, estimator_cfg, records, seed=seed, progress=progress)
+    kind = problem_type(model, structure)
+    est_cfg = estimator_for(model, estimator_cfg)
+    if kind == "effects":
+        fit = fit_effects(model, structure, est_cfg, records, seed=seed, progress=progress, truth_vessel=truth_vessel)
+    else:
+        fit_problem = fit_output_error if kind == "output_error" else fit_regression
+        fit = fit_problem(model, structure, est_cfg, records, seed=seed, progress=progress)
     # parameter rows with truth and drift; each error also scaled by its term's weight in the equation
     scales = term_scales(model, records, rows=fit.central_rows) if truth else {}
     truth_kind = "exact" if exact else truth_how.split(":")[0]
-    params = parameter_rows(fit.coef_rows, truth, truth_kind, fit.bias_sd, scales)
+    params = parameter_rows(fit.coef_rows, truth, truth_kind, fit.bias_sd, scales, fit.truth)
+    truth = {**truth, **{n: t for n, (t, _) in fit.truth.items() if t is not None}}
     metrics = fit.metrics
     metrics.update(drift_metrics(params, truth))
     metrics["truth_exact"] = float(bool(exact))
     metrics["n_params"] = len([p for p in params if p["name"] in truth])
     estimates = {p["name"]: p["estimate"] for p in params if p["name"] in truth}
     draws = posterior_draws(model, structure, fit.samples, estimates)
-    return Identification(estimates, params, metrics, fit.artefacts, fit.timings, draws)
+    return Identification(estimates, params, metrics, fit.artefacts, fit.timings, draws, fit.vessel, fit.replay)
+
+
+def fit_effects(model, structure, estimator_cfg: dict, records, seed: int = 0, progress: bool = False,
+                truth_vessel=None) -> _Fit:
+    """The estimator's fit of a model with effects (problem type ``"effects"``: variable projection,
+    ``study.identify.with_effects``): the free coefficients and the effects' parameters, the estimator's
+    diagnostics (``training_error``, ``effect_evaluations``), the identified model's vessel and replay. The
+    effects' parameters are rows of truth kind ``hidden effect``, their truth that of ``truth_vessel``'s
+    environment (None without it); a coefficient an effect frees has the truth vessel's value (the model's
+    vessel's without it)."""
+    from .with_effects.estimator import ModelWithEffects, hidden_truth
+    from .with_effects.problem import EffectsProblem
+
+    fit = _Fit()
+    t0 = time.perf_counter()
+    pb = EffectsProblem(model.vessel.cfg, model.cfg, records, structure)
+    est = make_estimator(estimator_cfg)
+    est.fit_problem(ModelWithEffects(pb, tuple(model.effects)), progress=progress)
+    fit.timings["fit"] = time.perf_counter() - t0
+    fit.metrics.update(est.diagnostics_ or {})  # named as the doctor names them: training_error, ...
+    own = model.truth()[0]
+    ref = truth_vessel if truth_vessel is not None else model.vessel
+    pnames = list(ref.param_names)
+    hidden = hidden_truth(pb, truth_vessel) if truth_vessel is not None else {}
+    for n, v in zip(est.names_, est.coef_):
+        eq = est.equations_[n]
+        fit.coef_rows.append((eq, n, float(v), _intervals(est, est.names_.index(n))))
+        if n in own:
+            continue
+        if eq != "effect":  # a coefficient an effect frees
+            fit.truth[n] = (float(ref.params[pnames.index(n)]), None)
+        else:
+            t = hidden.get(n, ref.params[pnames.index(n)] if truth_vessel is not None and n in pnames else None)
+            fit.truth[n] = (t, "hidden effect")
+    fit.vessel = est.vessel_
+    fit.replay = est.replay
+    return fit
 
 
 def fit_output_error(model, structure, estimator_cfg: dict, records, seed: int = 0, progress: bool = False) -> _Fit:
@@ -388,14 +467,23 @@ def _report_physical(model, coefs: dict, fit: _Fit) -> None:
     fit.coef_rows = [("N", n, physical[n], _sample_intervals(phys_samples.get(n))) for n in model.physical_names["N"]]
 
 
-def parameter_rows(coef_rows: list, truth: dict, truth_kind: str, bias_sd: dict, scales: dict) -> list:
+def parameter_rows(coef_rows: list, truth: dict, truth_kind: str, bias_sd: dict, scales: dict,
+                   other: dict | None = None) -> list:
     """The results table's parameter rows: estimate, truth (0 for a candidate the truth model lacks), the
-    estimator's extras, the truncation bias in posterior sd, and the error scaled by the term's weight."""
+    estimator's extras, the truncation bias in posterior sd, and the error scaled by the term's weight.
+    ``other``: ``{name: (truth or None, truth kind or None for truth_kind)}`` of parameters the model's truth
+    lacks but the fit knows (an effect's parameters)."""
     params = []
+    other = other or {}
     for eq, n, v, extra in coef_rows:
-        t = truth.get(n)
-        kind = truth_kind if n in truth else "candidate (not in the truth model)"
-        row = {"equation": eq, "name": n, "estimate": _num(v), "truth": _num(t if t is not None else 0.0),
+        if n in other:
+            t, kind = other[n][0], other[n][1] or truth_kind
+            t = _num(t)
+        else:
+            t = truth.get(n)
+            kind = truth_kind if n in truth else "candidate (not in the truth model)"
+            t = _num(t if t is not None else 0.0)
+        row = {"equation": eq, "name": n, "estimate": _num(v), "truth": t,
                "truth_kind": kind, **{k: _num(x) for k, x in extra.items()}}
         if n in bias_sd:
             row["truncation_bias_sd"] = _num(bias_sd[n])

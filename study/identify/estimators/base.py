@@ -5,6 +5,8 @@
   ``X`` is an (n, k) array or a DataFrame whose column names are the parameter names.
 - ``fit_output_error(problem)`` (only estimators that simulate): ``problem`` is a
   :class:`study.identify.output_error.OutputErrorProblem`; learns the same attributes.
+- ``fit_effects(problem, effects)`` (only estimators of models with effects): ``problem`` is a
+  ``study.identify.with_effects.EffectsProblem``.
 
 Learned attributes (trailing underscore):
 
@@ -30,7 +32,10 @@ Learned attributes (trailing underscore):
 Class attributes declare what an estimator can do (the base class gives every default):
 
 ``problem_types``
-    subset of ``{"regression", "output_error"}``; ``fit_output_error`` exists for the second.
+    subset of ``{"regression", "output_error", "effects"}``; ``fit_output_error`` exists for the second,
+    ``fit_effects(problem, effects)`` for the third (a force model with ``model.effects``: an
+    ``study.identify.with_effects.EffectsProblem`` whose rows change with the effects' nonlinear parameters;
+    ``study.identify.with_effects.estimator.VariableProjection``).
 ``accepts_prior``
     ``fit`` takes ``prior={column: (mean, sd)}``.
 ``models_row_noise``
@@ -42,7 +47,8 @@ Class attributes declare what an estimator can do (the base class gives every de
     ``fit`` (and ``fit_output_error``) take ``progress``.
 
 The engine (``study.identify.fit``) calls one method, :meth:`Estimator.fit_problem`, with a
-:class:`.problem.RegressionProblem` or an output-error problem; it checks the problem once and hands ``fit`` only
+:class:`.problem.RegressionProblem`, an output-error problem or a model with effects (each names its
+``problem_type``); it checks the problem once and hands ``fit`` only
 what the declarations say. A contract test checks each declaration against the signatures. ``skip(model,
 structure)`` returns ``(True, reason)`` for a pairing that makes no sense (benchopt's skip hook); the run is then
 recorded as 'skipped' with the reason, never raised. ``trust_verdict`` judges a regression run's intervals (None:
@@ -168,18 +174,20 @@ class Estimator:
         return None
 
     def fit_problem(self, problem, progress: bool = False):
-        """Fit a :class:`.problem.RegressionProblem` or an output-error problem: the engine's one entry.
+        """Fit a problem of one of the ``problem_types`` (its ``problem_type``): a
+        :class:`.problem.RegressionProblem`, an output-error problem or a model with effects: the engine's one
+        entry.
 
-        The problem is checked against the declared capabilities, then ``fit`` (or ``fit_output_error``) gets the
-        rows and what the estimator declares it takes. Returns ``self``."""
-        from .problem import RegressionProblem
-
-        kind = "regression" if isinstance(problem, RegressionProblem) else "output_error"
+        The problem is checked against the declared capabilities, then ``fit`` (``fit_output_error``,
+        ``fit_effects``) gets the rows and what the estimator declares it takes. Returns ``self``."""
+        kind = getattr(problem, "problem_type", "output_error")
         if kind not in self.problem_types:
             raise NotImplementedError(f"{type(self).__name__} does not fit {kind.replace('_', '-')} problems")
         kwargs = {"progress": bool(progress)} if self.reports_progress else {}
         if kind == "output_error":
             return self.fit_output_error(problem, **kwargs)
+        if kind == "effects":
+            return self.fit_effects(problem.problem, effects=problem.effects, **kwargs)
         kwargs.update(self._problem_inputs(problem))
         return self.fit(problem.X, problem.y, **kwargs)
 
@@ -220,6 +228,9 @@ class Estimator:
 
     def fit_output_error(self, problem):  # pragma: no cover - overridden by estimators that simulate
         raise NotImplementedError(f"{type(self).__name__} does not fit output-error problems")
+
+    def fit_effects(self, problem, effects=()):  # pragma: no cover - overridden by estimators of effects
+        raise NotImplementedError(f"{type(self).__name__} does not fit models with effects")
 
     def predict(self, X):
         if not hasattr(self, "coef_"):

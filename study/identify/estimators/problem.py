@@ -7,6 +7,7 @@ output-error problem is :class:`study.identify.output_error.OutputErrorProblem`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import pandas as pd
@@ -38,6 +39,7 @@ class RegressionProblem:
     noise_operators: object = None
     row_errors: object = None
     equation: str = ""
+    problem_type: ClassVar[str] = "regression"
 
     @property
     def names(self) -> list:

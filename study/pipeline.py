@@ -19,7 +19,7 @@ import pandas as pd
 from . import maneuvers as man_mod
 from .measure import NOISE_KINDS, MeasurementModel, sensor_sd
 from .metrics import prediction_metrics, standard_metrics
-from .run_common import estimator_config, known_vessel, shallow_water, skip_reason, trace_bytes
+from .run_common import estimator_config, known_vessel, run_estimators, shallow_water, skip_reason, trace_bytes
 from .sim import default_dt, load_vessel, simulate
 from .sim.effects import NotApplicable
 
@@ -234,7 +234,6 @@ class SimulatedJob:
 
     # -- shared by every dataset
     def prepare(self) -> dict | None:
-        from .identify.estimators import make_estimator
         from .identify.models import make_model
         from .identify.structures import make_structure
 
@@ -246,12 +245,9 @@ class SimulatedJob:
         self.model = make_model(conf["model"], self.base)
         self.structure = make_structure(conf["structure"])
         self.est_cfg = estimator_config(conf)
-        why = skip_reason(self.model, self.structure, make_estimator(self.est_cfg))
+        why = skip_reason(self.model, self.structure, *run_estimators(self.model, self.est_cfg))
         if why:
             return _skipped(why)
-        self.with_effects = bool(conf["model"].get("effects") or [])
-        if self.with_effects and (self.model.type != "kind" or self.structure.simulates):
-            return _skipped("model.effects need a force model (type: kind) and a regression structure")
         mans = conf["maneuvers"]
         self.train_names = list(mans["train"])
         self.random = {n for n in self.train_names if man_mod.get_maneuver(n).type == "random"}
@@ -287,30 +283,16 @@ class SimulatedJob:
         return records, timings
 
     def identify(self, rep) -> _Identified:
-        from .identify.fit import Identification, identify
+        from .identify.fit import identify
 
         dseed = int(getattr(rep, "dataset_seed", self.seed))
         records, timings = self.dataset(dseed)
         metrics = {"n_samples": int(sum(len(r) for r in records)), **self.sampling}
-        vessel = None
-        if self.with_effects:
-            # a model with effects (model.effects=[current, ...]): identified with them by variable projection
-            from .identify.with_effects import identify_in_study
-
-            t0 = time.perf_counter()
-            res = identify_in_study(self.base, self.conf["model"], records, self.conf["structure"], self.truth)
-            timings["fit"] = time.perf_counter() - t0
-            rel = [abs(p["estimate"] - p["truth"]) / abs(p["truth"]) for p in res["params"] if p["truth"]]
-            ident = Identification(res["estimates"], res["params"],
-                                   {**res["metrics"], "drift_median": float(np.median(rel)) if rel else float("nan")},
-                                   {}, {})
-            vessel = res["vessel"]
-        else:
-            ident = identify(self.model, self.structure, self.est_cfg, records, seed=dseed,
-                             progress=bool(self.conf.get("progress", False)))
+        ident = identify(self.model, self.structure, self.est_cfg, records, seed=dseed,
+                         progress=bool(self.conf.get("progress", False)), truth_vessel=self.truth)
         timings.update(ident.timings)
         metrics.update(ident.metrics)
-        return _Identified(rep, ident, metrics, timings, dict(ident.artefacts), vessel)
+        return _Identified(rep, ident, metrics, timings, dict(ident.artefacts), ident.vessel)
 
     # -- validation of a chunk of datasets
     def finish(self, done: list) -> list[dict]:

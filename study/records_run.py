@@ -356,12 +356,11 @@ def _validate(replay, data: FileData, channels, L: float, keep_traces: bool, met
 
 
 def _components(conf: dict):
-    """The run's known vessel, model, structure, estimator configuration and effects, as a tuple; or the reason
-    the run is skipped (a str)."""
-    from .identify.estimators import make_estimator
+    """The run's known vessel, model, structure and estimator configuration, as a tuple; or the reason the run is
+    skipped (a str)."""
     from .identify.models import make_model
     from .identify.structures import make_structure
-    from .run_common import estimator_config, known_vessel, skip_reason
+    from .run_common import estimator_config, known_vessel, run_estimators, skip_reason
     from .sim.effects import NotApplicable
 
     try:
@@ -371,13 +370,10 @@ def _components(conf: dict):
     model = make_model(conf["model"], base)
     structure = make_structure(conf["structure"])
     est_cfg = estimator_config(conf)
-    why = skip_reason(model, structure, make_estimator(est_cfg))
-    effects = tuple(conf["model"].get("effects") or [])
+    why = skip_reason(model, structure, *run_estimators(model, est_cfg))
     if why:
         return why
-    if effects and (model.type != "kind" or structure.simulates):
-        return "model.effects need a force model (type: kind) and a regression structure"
-    return base, model, structure, est_cfg, effects
+    return base, model, structure, est_cfg
 
 
 def _records_metrics(data: FileData) -> dict:
@@ -393,34 +389,14 @@ def _records_metrics(data: FileData) -> dict:
     return metrics
 
 
-def _identify_with_effects(base, conf: dict, data: FileData, effects: tuple, metrics: dict, timings: dict):
-    """The doctor's identification (variable projection with the effects), as in a simulated run: the params
-    rows and ``replay(record, name)`` of the fitted model."""
-    from .identify.with_effects import EffectsProblem
-
-    t0 = time.perf_counter()
-    pb = EffectsProblem(base.cfg, conf["model"], data.train.records, conf["structure"], names=data.train.names)
-    fit = pb.fit(effects, refine=True)
-    timings["fit"] = time.perf_counter() - t0
-    free = pb.free_coefficients(effects)  # coefficient -> equation (the model's and those effects free)
-    freed = {c: fit.coefs[c] for c in free if c in fit.coefs}
-    params = [{"equation": free.get(k, "effect"), "name": k, "estimate": float(v), "truth": None,
-               "truth_kind": TRUTH_KIND}
-              for k, v in {**pb.describe(fit), **freed}.items() if isinstance(v, (int, float))]
-    metrics.update(training_error=fit.training_error, effect_evaluations=fit.evaluations)
-
-    def replay(rec, name):
-        return pb.predict(fit, rec.data, pb.info_for(rec.data, rec.meta, name))
-    return params, replay
-
-
 def _identify_without_truth(model, structure, est_cfg: dict, conf: dict, data: FileData, seed: int, metrics: dict,
                             timings: dict, artefacts: dict):
     """The model identified as in a simulated run, with what that run measures against a truth dropped (the
-    vessel config is no truth): the params rows and the estimates."""
+    vessel config is no truth): the params rows, the estimates and the fit's own ``replay(record, name)`` (None
+    where the model is replayed from its estimates: every fit but that of a model with effects)."""
     from .identify.fit import identify
 
-    ident = identify(model, structure, est_cfg, [r.data for r in data.train.records], seed=seed,
+    ident = identify(model, structure, est_cfg, data.train.records, seed=seed,
                      progress=bool(conf.get("progress", False)))
     timings.update(ident.timings)
     artefacts.update(ident.artefacts)
@@ -442,7 +418,11 @@ def _identify_without_truth(model, structure, est_cfg: dict, conf: dict, data: F
     if bad:
         metrics["val_skipped"] = 1.0
         metrics["val_skipped_reason"] = f"no finite estimate of {bad}: the identified model cannot be simulated"
-    return params, estimates
+    replay = None
+    if ident.replay is not None:
+        def replay(rec, name):
+            return ident.replay(rec.data, rec.meta, name)
+    return params, estimates, replay
 
 
 def _validate_or_skip(conf: dict, data: FileData, model, base, estimates: dict, replay, metrics: dict,
@@ -469,23 +449,21 @@ def run_on_records(conf: dict, data: FileData) -> dict:
     parts = _components(conf)
     if isinstance(parts, str):
         return _skipped(parts)
-    base, model, structure, est_cfg, effects = parts
+    base, model, structure, est_cfg = parts
     notes = ["data from files: nothing simulated; environment, noise, maneuvers and sim do not apply and are not in "
              "this run's configuration; no truth (params truth empty, no drift metrics)"]
     notes += _depth_notes(base, conf, data)
     metrics = _records_metrics(data)
     artefacts = {}
     estimates, replay = {}, None
-    if effects:  # the doctor's identification, as in a simulated run
-        params, replay = _identify_with_effects(base, conf, data, effects, metrics, timings)
-    elif model.type == "kind" and not model.equations:  # model=known: nothing to identify, the config replayed
+    if model.type == "kind" and not model.equations and not model.effects:  # model=known: nothing to identify
         params = []
         metrics["n_params"] = 0
         notes.append("nothing identified: the model has no free coefficients (the vessel config's model is "
                      "replayed as it is)")
     else:
-        params, estimates = _identify_without_truth(model, structure, est_cfg, conf, data, seed, metrics, timings,
-                                                    artefacts)
+        params, estimates, replay = _identify_without_truth(model, structure, est_cfg, conf, data, seed, metrics,
+                                                            timings, artefacts)
     metrics["notes"] = "; ".join(notes)
 
     t0 = time.perf_counter()

@@ -32,9 +32,19 @@ def estimator_config(conf: dict) -> dict:
     return cfg
 
 
-def skip_reason(model, structure, estimator) -> str | None:
-    """Why this model x structure x estimator cannot run (None when it can)."""
-    for who in (model, estimator):
+def run_estimators(model, est_cfg: dict) -> list:
+    """The run's estimator and, when the model is identified by another one (a model with effects:
+    ``study.identify.fit.estimator_for``), that one too."""
+    from .identify.estimators import make_estimator
+    from .identify.fit import estimator_for
+
+    used = estimator_for(model, est_cfg)
+    return [make_estimator(est_cfg)] + ([make_estimator(used)] if used is not est_cfg else [])
+
+
+def skip_reason(model, structure, *estimators) -> str | None:
+    """Why this model x structure x estimator(s) cannot run (None when it can)."""
+    for who in (model, *estimators):
         skip, why = who.skip(structure) if who is model else who.skip(model, structure)
         if skip:
             return why

@@ -61,6 +61,11 @@ class Model:
         self.vessel = vessel
         self.source = str(cfg.get("source", ""))
 
+    @property
+    def effects(self) -> tuple:
+        """The effects identified with the model (``model.effects``: names of ``conf/effect``), empty for none."""
+        return tuple(self.cfg.get("effects") or ())
+
     # -- to be provided
     equations: dict  # eq -> regression column names
     physical_names: dict  # eq -> physical parameter names

@@ -5,6 +5,8 @@
   ``X`` is an (n, k) array or a DataFrame whose column names are the parameter names.
 - ``fit_output_error(problem)`` (only estimators that simulate): ``problem`` is a
   :class:`study.identify.output_error.OutputErrorProblem`; learns the same attributes.
+- ``fit_effects(problem, effects)`` (only estimators of models with effects): ``problem`` is a
+  ``study.identify.with_effects.EffectsProblem``.
 
 Learned attributes (trailing underscore):
 
@@ -27,9 +29,30 @@ Learned attributes (trailing underscore):
     name -> ``pandas.DataFrame`` (saved as CSV) or ``bytes`` (saved as is): curves and chains that the figures
     are rebuilt from (L-curve, online convergence, emcee chain).
 
-Class attributes say what an estimator can do: ``problem_types`` (subset of ``{"regression",
-"output_error"}``). ``skip(model, structure)`` returns ``(True, reason)`` for a pairing that makes no sense
-(benchopt's skip hook); the run is then recorded as 'skipped' with the reason, never raised.
+Class attributes declare what an estimator can do (the base class gives every default):
+
+``problem_types``
+    subset of ``{"regression", "output_error", "effects"}``; ``fit_output_error`` exists for the second,
+    ``fit_effects(problem, effects)`` for the third (a force model with ``model.effects``: an
+    ``study.identify.with_effects.EffectsProblem`` whose rows change with the effects' nonlinear parameters;
+    ``study.identify.with_effects.estimator.VariableProjection``).
+``accepts_prior``
+    ``fit`` takes ``prior={column: (mean, sd)}``.
+``models_row_noise``
+    ``fit`` takes ``noise_operators`` (``study.identify.row_noise.RowOperators``) and ``row_errors``
+    (``study.identify.row_errors.RowErrors``), and sets ``row_noise_`` (the fitted noise model or None). Whether
+    one instance wants them (its likelihood) is :attr:`Estimator.uses_noise_operators` and
+    :attr:`Estimator.uses_row_errors`.
+``reports_progress``
+    ``fit`` (and ``fit_output_error``) take ``progress``.
+
+The engine (``study.identify.fit``) calls one method, :meth:`Estimator.fit_problem`, with a
+:class:`.problem.RegressionProblem`, an output-error problem or a model with effects (each names its
+``problem_type``); it checks the problem once and hands ``fit`` only
+what the declarations say. A contract test checks each declaration against the signatures. ``skip(model,
+structure)`` returns ``(True, reason)`` for a pairing that makes no sense (benchopt's skip hook); the run is then
+recorded as 'skipped' with the reason, never raised. ``trust_verdict`` judges a regression run's intervals (None:
+the estimator gives no verdict).
 """
 from __future__ import annotations
 
@@ -128,6 +151,69 @@ class Estimator:
         return f"{type(self).__name__}({', '.join(f'{k}={v!r}' for k, v in self.get_params(deep=False).items())})"
 
     problem_types: ClassVar[frozenset] = frozenset({"regression"})
+    #: ``fit`` takes ``prior={column: (mean, sd)}``
+    accepts_prior: ClassVar[bool] = False
+    #: ``fit`` takes ``noise_operators`` and ``row_errors`` and sets ``row_noise_``
+    models_row_noise: ClassVar[bool] = False
+    #: ``fit`` and ``fit_output_error`` take ``progress``
+    reports_progress: ClassVar[bool] = False
+
+    @property
+    def uses_noise_operators(self) -> bool:
+        """Whether this instance's ``fit`` wants the structure's noise operators (``models_row_noise`` only)."""
+        return False
+
+    @property
+    def uses_row_errors(self) -> bool:
+        """Whether this instance's ``fit`` wants the rows' errors removed (``models_row_noise`` only)."""
+        return False
+
+    @property
+    def row_error_probes(self) -> int | None:
+        """Noisy copies of the records the regressors' noise is measured with (None: the engine's default)."""
+        return None
+
+    def fit_problem(self, problem, progress: bool = False):
+        """Fit a problem of one of the ``problem_types`` (its ``problem_type``): a
+        :class:`.problem.RegressionProblem`, an output-error problem or a model with effects: the engine's one
+        entry.
+
+        The problem is checked against the declared capabilities, then ``fit`` (``fit_output_error``,
+        ``fit_effects``) gets the rows and what the estimator declares it takes. Returns ``self``."""
+        kind = getattr(problem, "problem_type", "output_error")
+        if kind not in self.problem_types:
+            raise NotImplementedError(f"{type(self).__name__} does not fit {kind.replace('_', '-')} problems")
+        kwargs = {"progress": bool(progress)} if self.reports_progress else {}
+        if kind == "output_error":
+            return self.fit_output_error(problem, **kwargs)
+        if kind == "effects":
+            return self.fit_effects(problem.problem, effects=problem.effects, **kwargs)
+        kwargs.update(self._problem_inputs(problem))
+        return self.fit(problem.X, problem.y, **kwargs)
+
+    def _problem_inputs(self, problem) -> dict:
+        """The keyword arguments of ``fit`` a regression problem supplies, refused where not declared."""
+        out = {}
+        if problem.prior is not None:
+            missing = problem.missing_prior()
+            if missing:
+                raise ValueError(f"equation {problem.equation}: the prior has no value for {missing}")
+            if not self.accepts_prior:
+                raise ValueError(f"{type(self).__name__} takes no prior (accepts_prior is False)")
+            out["prior"] = problem.prior
+        for name in ("noise_operators", "row_errors"):
+            value = getattr(problem, name)
+            if value is None:
+                continue
+            if not self.models_row_noise:
+                raise ValueError(f"{type(self).__name__} does not model the rows' noise: no {name} for it")
+            out[name] = value
+        return out
+
+    def trust_verdict(self, structure_name: str, bias_sd: dict, dropped_differences: int, corrected: bool,
+                      metrics: dict) -> tuple[bool, str] | None:
+        """``(trusted, note)`` of a regression run's intervals, or None: this estimator gives no verdict."""
+        return None
 
     def skip(self, model, structure) -> tuple[bool, str]:
         """``(True, reason)`` when this estimator cannot be used with this model and sample structure."""
@@ -142,6 +228,9 @@ class Estimator:
 
     def fit_output_error(self, problem):  # pragma: no cover - overridden by estimators that simulate
         raise NotImplementedError(f"{type(self).__name__} does not fit output-error problems")
+
+    def fit_effects(self, problem, effects=()):  # pragma: no cover - overridden by estimators of effects
+        raise NotImplementedError(f"{type(self).__name__} does not fit models with effects")
 
     def predict(self, X):
         if not hasattr(self, "coef_"):

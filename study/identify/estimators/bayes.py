@@ -63,6 +63,9 @@ class EmceeSampler(Estimator):
     """
 
     problem_types = frozenset({"regression", "output_error"})
+    accepts_prior = True
+    models_row_noise = True
+    reports_progress = True
 
     def __init__(self, n_walkers: int | None = None, target_ess: int = 1000, max_steps: int = 20000,
                  check_every: int | None = None, min_steps: int | None = None, prior_scale: float = 10.0,
@@ -241,6 +244,11 @@ class EmceeSampler(Estimator):
     def uses_row_errors(self) -> bool:
         """The rows' truncation and regressors' noise are corrected (``study.identify.row_errors``)."""
         return self.likelihood == "regression" and bool(self.correct_rows)
+
+    @property
+    def row_error_probes(self) -> int | None:
+        """``n_probes``: the noisy copies of the records the regressors' noise is measured with."""
+        return self.n_probes
 
     def gaussian_regression(self, X, y, noise_operators=None, q_raw=None, prior_sd=None, errors=None):
         """(mean, covariance, diagnostics, noise model or None) of the coefficients' posterior under the 'regression'

@@ -48,6 +48,7 @@ class DifferentialEvolution(Estimator):
     """
 
     problem_types = frozenset({"regression", "output_error"})
+    reports_progress = True
 
     def __init__(self, strategy: str = "best1bin", popsize: int = 15, maxiter: int = 300, tol: float = 1e-6,
                  atol: float = 0.0, mutation=(0.5, 1.0), recombination: float = 0.9, init: str = "sobol",

@@ -231,6 +231,8 @@ class MapEstimator(Estimator):
         diagnostic ``prior_widening`` and the identifiability is measured against the widened prior.
     """
 
+    accepts_prior = True
+
     def __init__(self, prior: dict | None = None, interval: float = 0.9,
                  widen_prior: bool = True):  # noqa: D107 (prior: see class doc)
         self.prior = prior

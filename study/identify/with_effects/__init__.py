@@ -17,15 +17,16 @@ The identified model is then replayed open loop through each record with its mea
 The modules: ``problem`` (the records, the model, the rows, the linear solve and the replay), ``search`` (the
 nonlinear parameters' search and the :class:`Fit` it returns), ``uncertainty`` (the anchor's prior, the
 posterior, identifiability), ``replay_errors`` (how far a replay is from a record), ``inverse_dynamics`` (the
-residual forces) and ``in_study`` (a study run with ``model.effects``).
+residual forces) and ``estimator`` (:class:`VariableProjection`, the estimator of a study run with
+``model.effects``: ``study.identify.fit.fit_effects``).
 """
-from .in_study import identify_in_study
+from .estimator import ModelWithEffects, VariableProjection
 from .inverse_dynamics import residuals
 from .problem import ENVELOPE, EQUATIONS, EffectsProblem, as_frame, record_h_T
 from .replay_errors import (CHANNELS, NRMSE_CAP, UNITS, diverged_records, record_error, record_errors,
                             validation_error)
 from .search import Fit
 
-__all__ = ["CHANNELS", "ENVELOPE", "EQUATIONS", "NRMSE_CAP", "UNITS", "EffectsProblem", "Fit", "as_frame",
-           "diverged_records", "identify_in_study", "record_error", "record_errors", "record_h_T", "residuals",
-           "validation_error"]
+__all__ = ["CHANNELS", "ENVELOPE", "EQUATIONS", "NRMSE_CAP", "UNITS", "EffectsProblem", "Fit", "ModelWithEffects",
+           "VariableProjection", "as_frame", "diverged_records", "record_error", "record_errors", "record_h_T",
+           "residuals", "validation_error"]

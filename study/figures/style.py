@@ -51,6 +51,7 @@ ESTIMATOR_STYLE = {
     "de_staged": ("#665500", "d"),     # dark ochre, DE's family (searched for: at least 25 from every other colour)
     "emcee": ("#8C564B", "h"),         # tab10 brown
     "map": ("#D55E00", "p"),           # Okabe-Ito vermillion
+    "variable_projection": ("#3D5C5C", "H"),  # dark slate (searched for: at least 22 from every other colour)
 }
 
 #: sample structure -> (colour, marker, hatch, line style): Okabe-Ito colours; hatches and line styles tell them

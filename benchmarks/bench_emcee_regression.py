@@ -44,7 +44,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from study.identify.estimators import make_estimator  # noqa: E402
-from study.identify.fit import prepare  # noqa: E402
+from study.identify.rows import prepare  # noqa: E402
 
 GRAND_CASES = ("kvlcc2_mmg", "kcs_mmg", "usv_full", "mariner_abkowitz", "auv", "kt_nomoto2")
 Z95 = 1.6448536269514722

@@ -39,7 +39,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from study.identify.estimators import list_estimators, make_estimator  # noqa: E402
-from study.identify.fit import identify, prepare  # noqa: E402
+from study.identify.fit import identify  # noqa: E402
+from study.identify.rows import prepare  # noqa: E402
 from study.identify.models import make_model  # noqa: E402
 from study.identify.structures import make_structure  # noqa: E402
 from study.measure import MeasurementModel  # noqa: E402

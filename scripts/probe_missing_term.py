@@ -20,7 +20,7 @@ from omegaconf import OmegaConf  # noqa: E402
 
 from study.identify.estimators import make_estimator  # noqa: E402
 from study.identify.estimators.prior import gls_posterior  # noqa: E402
-from study.identify.fit import prepare, regression_rows, row_errors, truncation_rows  # noqa: E402
+from study.identify.rows import prepare, regression_rows, row_errors, truncation_rows  # noqa: E402
 from study.pipeline import SimulatedJob  # noqa: E402
 
 

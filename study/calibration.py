@@ -6,7 +6,7 @@ structure and regression likelihood (``tests/test_regression_calibration.py``,
 The case is the study's own: the truth vessel simulated once through the training manoeuvres
 (``study.pipeline.simulate_set``), then measured again and again with fresh noise (``study.pipeline.measurement``,
 dataset ``i`` with the noise seeds of a run with ``seed=i``), turned into rows by the structure and its post-processing
-(``study.identify.fit.prepare``; diff_center's random split drawn per dataset as in a run). Only the measurement
+(``study.identify.rows.prepare``; diff_center's random split drawn per dataset as in a run). Only the measurement
 noise changes between datasets: coverage over the sampling distribution of the noise, the trajectories fixed.
 
 The posteriors are evaluated in closed form, where they are Gaussian:
@@ -123,7 +123,8 @@ def dataset_intervals(case: Case, structure, seed: int, likelihood: str = "regre
     ``bias_est``, the truncation bias the run estimates from its own noisy records (``study.identify.truncation``;
     its aim: ``limit - truth``)."""
     from .identify.estimators.bayes import EmceeSampler
-    from .identify.fit import prepare, row_errors, truncation_bias, truncation_rows
+    from .identify.fit import truncation_bias
+    from .identify.rows import prepare, row_errors, truncation_rows
 
     if likelihood not in LIKELIHOODS:
         raise ValueError(f"likelihood must be one of {LIKELIHOODS}, got {likelihood!r}")

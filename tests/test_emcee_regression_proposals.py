@@ -25,7 +25,7 @@ from scipy import stats
 from study import calibration as cal
 from study.identify.estimators import make_estimator
 from study.identify.estimators.bayes import IidRegressionProposal, LaplaceProposal, SnookerMove
-from study.identify.fit import prepare
+from study.identify.rows import prepare
 from study.identify.priors import prior_for
 from study.identify.structures import make_structure
 

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 from study.identify.estimators import LeastSquares, list_estimators, make_estimator
-from study.identify.fit import prepare
+from study.identify.rows import prepare
 from study.identify.models import make_model
-from study.identify.fit import build
+from study.identify.rows import build
 from study.identify.structures import list_structures, make_structure
 from study.config import list_configs, read_config
 from study.sim import load_vessel, simulate

@@ -260,7 +260,7 @@ def test_structure_rts_rows():
     measured 0.3-0.8 % with rts, 0.2-0.3 % with Savitzky-Golay, at 0.05-0.1 s sampling); on a record with
     1 % noise on u, v, r (and GNSS positions, heading) the rows' derivatives of u, v, r are at most half as far
     from the truth as Savitzky-Golay's (measured 4-14 % of the spread against 20-370 %)."""
-    from study.identify.fit import prepare
+    from study.identify.rows import prepare
     from study.identify.models import make_model
 
     cfg = read_config("structure", "smoothed")

@@ -24,7 +24,7 @@ whose expectation is off by ``E[N' W N] theta - E[N' W eps]``. The corrected nor
 are unbiased to first order. ``M`` and ``g`` are not derived per structure: they are averaged over
 ``n_probes`` **probes**, each the run's own records with fresh white noise added at the level estimated from each
 channel (``state_estimation.noise_std``: fourth differences, median absolute deviation), passed through the
-structure (``study.identify.fit.regression_rows``) and the training rows' map (differencing, cleaning, split):
+structure (``study.identify.rows.regression_rows``) and the training rows' map (differencing, cleaning, split):
 so every structure, its post-processing and nonlinear regressors (r^3) are covered alike. The probes' own Monte
 Carlo error of ``g - M theta`` is added to the covariance (measured per run from the probes' spread).
 

@@ -40,7 +40,7 @@ PARAM_REQUIRED = ("equation", "name", "estimate", "truth")
 PARAM_OPTIONAL = ("ci_low", "ci_high", "std", "vif", "selected",
                   # prior-anchored fits (estimator map, emcee with a prior): the prior and posterior sd / prior sd
                   "prior_mean", "prior_sd", "identifiability",
-                  # the term's share of its equation and the error scaled by it (study.identify.fit.term_scales)
+                  # the term's share of its equation and the error scaled by it (study.identify.rows.term_scales)
                   "term_scale", "scaled_error",
                   # emcee's regression runs: the structure's truncation bias in posterior sd (study.identify.truncation)
                   "truncation_bias_sd")

@@ -418,10 +418,7 @@ def _identify_without_truth(model, structure, est_cfg: dict, conf: dict, data: F
     if bad:
         metrics["val_skipped"] = 1.0
         metrics["val_skipped_reason"] = f"no finite estimate of {bad}: the identified model cannot be simulated"
-    replay = None
-    if ident.replay is not None:
-        def replay(rec, name):
-            return ident.replay(rec.data, rec.meta, name)
+    replay = None if ident.replay is None else (lambda rec, name: ident.replay(rec.data, rec.meta, name))
     return params, estimates, replay
 
 

@@ -204,10 +204,10 @@ def test_another_scale_is_another_setup():
 def test_a_turn_predicted_elsewhere_leaves_the_setup_effect_out_unless_asked(biased):
     from study.doctor.turn_prediction import predict_turn
     from study.identify.effects import registry
-    from study.identify.with_effects import EffectsProblem
+    from study.identify.with_effects import EffectsProblem, identify_effects
 
     pb = EffectsProblem(VESSEL, KNOWN, tagged(biased[0], "t", facility="towing_tank"), effects=registry(["yaw_bias"]))
-    fit = pb.fit(("yaw_bias",))
+    fit = identify_effects(pb, ("yaw_bias",))
     bare = predict_turn(pb, without_effects(pb, fit, ["yaw_bias"]), draws=0)
     elsewhere = predict_turn(pb, fit, draws=0)  # a turn nobody measured: not the training set-up
     other = predict_turn(pb, fit, draws=0, facility="basin")

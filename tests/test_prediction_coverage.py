@@ -24,7 +24,7 @@ import pytest
 from doctor_cases import KNOWN, MMG_HULL, VESSEL, make_records, perturbed_prior
 from study.doctor.predictions import TURN_METRICS, predict_turn
 from study.identify.effects import registry
-from study.identify.with_effects import EffectsProblem, Fit
+from study.identify.with_effects import EffectsProblem, Fit, identify_effects
 
 GROUPS = (("Yvvv", "Nvvv"), ("Yvvr", "Nvvr"), ("Yvrr", "Nvrr"), ("Yrrr", "Nrrr"))
 SIZES = (2.0, 3.0)
@@ -50,7 +50,7 @@ def dataset(pair, size, seed):
                         model_error=False)
     prior = perturbed_prior(truth, MMG_HULL, 0.2 if seed % 2 == 0 else -0.2)
     pb = EffectsProblem(prior, model, train, effects=registry(["hull_nonlinear"]), anchor=0.3)
-    return want, predict_turn(pb, pb.fit(()), draws=48, seed=seed)
+    return want, predict_turn(pb, identify_effects(pb), draws=48, seed=seed)
 
 
 @pytest.mark.slow

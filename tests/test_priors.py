@@ -147,12 +147,12 @@ def test_doctor_reports_which_coefficients_the_records_determine():
     yaw derivatives come out determined and near the truth, and the report names some nonlinear term as not
     determined, in a plain sentence."""
     from doctor_cases import MMG_HULL, make_records, perturbed_prior
-    from study.identify.with_effects import EffectsProblem
+    from study.identify.with_effects import EffectsProblem, identify_effects
 
     train, _, truth_cfg = make_records({}, duration=200.0)
     prior_cfg = perturbed_prior(truth_cfg, MMG_HULL, 0.2)
     P = EffectsProblem(prior_cfg, MMG_HULL, train, anchor=0.3)
-    rows = {r["coefficient"]: r for r in P.identifiability(P.fit(()))}
+    rows = {r["coefficient"]: r for r in P.identifiability(identify_effects(P))}
     truth = load_vessel(truth_cfg)
     for n in ("Nv", "Nr", "Yv"):
         assert rows[n]["ratio"] < 0.5, rows[n]

@@ -11,7 +11,7 @@ import pytest
 
 from study.config import read_config
 from study.identify.effects import effect_config, make_effect
-from study.identify.with_effects import EffectsProblem
+from study.identify.with_effects import EffectsProblem, identify_effects
 from study.sim import load_vessel
 
 from doctor_cases import KNOWN, VESSEL, make_records
@@ -32,7 +32,7 @@ def _truth(vessel, name):
 def test_rudder_inflow_recovers_an_asymmetric_flow_straightening():
     example = effect_config("rudder_inflow")["example"]
     pb, truth = _problem(example, ["rudder_inflow"])
-    fit = pb.fit(("rudder_inflow",))
+    fit = identify_effects(pb, ("rudder_inflow",))
     base = pb.solve(("rudder_inflow",), {"gR_neg": pb.base_param("gR_neg"), "gR_pos": pb.base_param("gR_pos"),
                                          "lR": pb.base_param("lR"), "eps": pb.base_param("eps")})[2]
     # the yaw rows' residual at least halved (the surge rows are dominated by the noise on du/dt)
@@ -45,7 +45,7 @@ def test_rudder_inflow_stays_inside_its_bounds():
     # a truth beyond the upper bound of gamma_R (1.0): the estimate sits on the bound, never beyond it
     example = {"vessel": {"rudder": {"gamma_R_neg": 1.4, "gamma_R_pos": 1.4}}}
     pb, _ = _problem(example, ["rudder_inflow"])
-    fit = pb.fit(("rudder_inflow",), max_evals=40)
+    fit = identify_effects(pb, ("rudder_inflow",), max_evals=40)
     for name, lo, hi, _ in pb.outer_params(("rudder_inflow",)):
         assert lo <= fit.outer[name] <= hi, (name, fit.outer[name], lo, hi)
     assert max(fit.outer["gR_neg"], fit.outer["gR_pos"]) > 0.8, fit.outer  # pushed towards the truth's side
@@ -67,7 +67,7 @@ def test_propeller_thrust_recovers_the_wake_fraction_from_the_thrust():
     # 2 % of its mean, measured 1.1 %) from over 10 % with the model's w_P0
     assert abs(tf["wP0"] - _truth(truth, "wP0")) <= 0.01, tf
     assert tf["thrust_rms_N"] < 0.02 * tf["thrust_mean_N"] < 0.2 * tf["thrust_rms_vessel_N"], tf
-    fit = pb.fit(("propeller_thrust",))
+    fit = identify_effects(pb, ("propeller_thrust",))
     assert fit.values["wP0"] == pytest.approx(tf["wP0"]) and np.isfinite(fit.coefs["tP"])
     v = pb.vessel(("propeller_thrust",), fit.values, None, fit.coefs)
     assert float(v.params[v.param_names.index("wP0")]) == pytest.approx(tf["wP0"])

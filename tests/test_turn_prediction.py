@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from doctor_cases import KNOWN, MMG_HULL, VESSEL, make_records, perturbed_prior
-from study.identify.with_effects import EffectsProblem, Fit
+from study.identify.with_effects import EffectsProblem, Fit, identify_effects
 from study.doctor.turn_prediction import predict_turn
 
 
@@ -27,7 +27,7 @@ def test_identified_hull_predicts_the_truths_turn_and_its_interval_holds_it(case
     prior = predict_turn(EffectsProblem(prior_cfg, KNOWN, train, effects={}), none, draws=0)["tactical_diameter_L"]
     assert abs(prior / want - 1.0) > 0.10  # the prior alone is far off: the records must do the work
     pb = EffectsProblem(prior_cfg, MMG_HULL, train, effects={}, anchor=0.3)
-    got = predict_turn(pb, pb.fit(()), draws=64, seed=1)
+    got = predict_turn(pb, identify_effects(pb), draws=64, seed=1)
     assert got["tactical_diameter_L"] == pytest.approx(want, rel=0.03)
     assert got["finite_draws"] == 64
     assert got["td_low"] <= want <= got["td_high"], got

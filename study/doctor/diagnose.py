@@ -40,7 +40,8 @@ import numpy as np
 
 from .. import facility as fac
 from ..identify.effects import list_effects, registry
-from ..identify.with_effects import CHANNELS, UNITS, EffectsProblem, Fit, record_errors, validation_error
+from ..identify.with_effects import (CHANNELS, UNITS, EffectsProblem, Fit, identify_effects, record_errors,
+                                     validation_error)
 from .decision import EXPLAINS_MOST, MIN_RECORDS_FOR_TEST, Evaluation, Options, decide, mean_on
 from .model_error import without_effects
 
@@ -124,14 +125,14 @@ class Doctor:
         if key in self.evaluations:
             return self.evaluations[key]
         t0 = time.perf_counter()
-        fit = self.problem.fit(effects, start=start, fixed=fixed, refine=refine)
+        fit = identify_effects(self.problem, effects, start=start, fixed=fixed, refine=refine)
         errors, folds = {}, []
         if self.mode == "given":
             for name, df, info in zip(self.val_names, self.val_df, self.val_infos):
                 errors[name] = record_errors(df, self.predict(self.problem, fit, df, info), self.problem.floors)
         else:
             for i, (name, df) in enumerate(zip(self.train_names, self.train_df)):
-                f = self.folds[i].fit(effects, start=fit.outer, grid=False)  # warm start from the full fit
+                f = identify_effects(self.folds[i], effects, start=fit.outer, grid=False)  # warm start from the full fit
                 folds.append(f)
                 errors[name] = record_errors(df, self.predict(self.folds[i], f, df, self.problem.infos[i], i),
                                              self.problem.floors)

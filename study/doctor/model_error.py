@@ -29,7 +29,7 @@ from types import SimpleNamespace
 import numpy as np
 import pandas as pd
 
-from ..identify.with_effects import Fit
+from ..identify.with_effects import Fit, identify_effects
 from . import prediction_interval as pi
 
 #: the metric whose error stands in for a metric no held-out record carries: the RMS yaw rate, which a turning
@@ -201,7 +201,7 @@ def refit(problem, fit, records_idx=None, anchor: float | None = None):
     pb = EffectsProblem(problem.vessel_cfg, model_cfg_of(problem), _records_of(problem, idx), problem.structure,
                         problem.effects, [problem.infos[i].name for i in idx],
                         problem.anchor if anchor is None else anchor)
-    f = pb.fit(fit.effects, start=dict(fit.outer), grid=False, fixed=tuple(fit.outer))
+    f = identify_effects(pb, fit.effects, start=dict(fit.outer), grid=False, fixed=tuple(fit.outer))
     return pb, f
 
 

@@ -15,6 +15,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..identify.with_effects import identify_effects
 from . import model_error as me
 from . import prediction_interval as pi
 
@@ -248,7 +249,7 @@ def default_alternatives(problem, fit, tie: float = 0.1) -> tuple:
     alts += [pub] if pub else []
     hn = problem.effects.get("hull_nonlinear")
     if hn is not None and "hull_nonlinear" not in fit.effects and hn.applies(problem) is None:
-        other = problem.fit(tuple(fit.effects) + ("hull_nonlinear",), start=dict(fit.outer), grid=False,
+        other = identify_effects(problem, tuple(fit.effects) + ("hull_nonlinear",), start=dict(fit.outer), grid=False,
                             fixed=tuple(fit.outer))
         if me.data_error(problem, other) <= (1.0 + tie) * me.data_error(problem, fit):
             alts.append(("with the hull terms the model lacks freed (hull_nonlinear)", problem, other))

@@ -52,7 +52,7 @@ def residual_by_rudder(problem, fit, names=None, bins=BINS_DEG) -> dict:
 def kvlcc2_hsva(data_dir=None) -> dict:
     """The KVLCC2 case (see the module docstring): model -> effects -> residual table, errors, parameters."""
     from ..config import read_config
-    from ..identify.with_effects import EffectsProblem, record_errors, validation_error
+    from ..identify.with_effects import EffectsProblem, identify_effects, record_errors, validation_error
     from ..loaders import load_records, real_data_dir
 
     d = Path(data_dir) if data_dir else real_data_dir() / "kvlcc2_hsva" / "raw_data"
@@ -66,7 +66,7 @@ def kvlcc2_hsva(data_dir=None) -> dict:
                                  ("hull identified, anchored 30 %", read_config("model", "mmg_hull"), 0.3)):
         pb = EffectsProblem(vessel, model, train, anchor=anchor, names=names)
         for effs in EFFECT_SETS:
-            fit = pb.fit(effs)
+            fit = identify_effects(pb, effs)
             errs = {r.meta["name"]: record_errors(r.data, pb.predict(fit, r.data, pb.info_for(r.data, r.meta)),
                                                   pb.floors) for r in val}
             desc = {k: v for k, v in pb.describe(fit, model=False).items() if isinstance(v, (int, float))}

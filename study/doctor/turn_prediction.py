@@ -85,7 +85,7 @@ def kvlcc2_hsva_table(data_dir=None, draws: int = 64) -> pd.DataFrame:
     speed at its own self-propulsion rpm (with the interval of :func:`predict_turn`; the other identified cases
     that fit as well count among its alternatives), and to starboard at HSVA's measured rpm."""
     from ..identify.effects import list_effects, registry
-    from ..identify.with_effects import EffectsProblem, Fit
+    from ..identify.with_effects import EffectsProblem, Fit, identify_effects
     from ..loaders import load_records, real_data_dir
     from .model_error import calibrate
     from .predictions import TURNS
@@ -105,7 +105,7 @@ def kvlcc2_hsva_table(data_dir=None, draws: int = 64) -> pd.DataFrame:
             continue
         pb = problems.setdefault(anchor, EffectsProblem(conf["vessel"], conf["model"], train, None, effects, None,
                                                        anchor))
-        cases.append((label, pb, pb.fit(effs), "keep_setup_effects" in label))
+        cases.append((label, pb, identify_effects(pb, effs), "keep_setup_effects" in label))
     rows, details = [], {}
     for k, (label, pb, fit, keep) in enumerate(cases):
         cal = calibrate(pb, fit)

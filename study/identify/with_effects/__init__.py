@@ -20,7 +20,7 @@ posterior, identifiability), ``replay_errors`` (how far a replay is from a recor
 residual forces) and ``estimator`` (:class:`VariableProjection`, the estimator of a study run with
 ``model.effects``: ``study.identify.fit.fit_effects``).
 """
-from .estimator import ModelWithEffects, VariableProjection
+from .estimator import ModelWithEffects, VariableProjection, identify_effects
 from .inverse_dynamics import residuals
 from .problem import ENVELOPE, EQUATIONS, EffectsProblem, as_frame, record_h_T
 from .replay_errors import (CHANNELS, NRMSE_CAP, UNITS, diverged_records, record_error, record_errors,
@@ -28,5 +28,5 @@ from .replay_errors import (CHANNELS, NRMSE_CAP, UNITS, diverged_records, record
 from .search import Fit
 
 __all__ = ["CHANNELS", "ENVELOPE", "EQUATIONS", "NRMSE_CAP", "UNITS", "EffectsProblem", "Fit", "ModelWithEffects",
-           "VariableProjection", "as_frame", "diverged_records", "record_error", "record_errors", "record_h_T",
+           "VariableProjection", "as_frame", "identify_effects", "diverged_records", "record_error", "record_errors", "record_h_T",
            "residuals", "validation_error"]

@@ -5,6 +5,11 @@ Its problem is a :class:`ModelWithEffects`: an :class:`~.problem.EffectsProblem`
 effects' catalogue) and the effects to identify. The rows depend on the effects' nonlinear parameters, so the
 problem is no regression problem: the estimator declares the problem type ``"effects"`` and
 ``Estimator.fit_problem`` hands it to :meth:`VariableProjection.fit_effects`.
+
+It is the one way a model with effects is identified: a study run (``study.identify.fit``) and the model doctor
+(its ranking, ladder, folds and refits, through :func:`identify_effects`) both come here. The doctor fits one
+problem many times; the problem keeps its caches (rows, replays) between fits, and the estimator's ``start``,
+``grid`` and ``fixed`` carry a warm start from one fit to the next.
 """
 from __future__ import annotations
 
@@ -15,7 +20,9 @@ from typing import ClassVar
 import numpy as np
 
 from ..estimators.base import Estimator
+from . import search
 from .problem import EffectsProblem
+from .search import Fit
 
 
 @dataclass(frozen=True)
@@ -49,6 +56,13 @@ class VariableProjection(Estimator):
         Polish the nonlinear parameters on the training records' replays.
     max_evals : int
         Evaluations of each local search.
+    start : dict or None
+        Start values of nonlinear parameters (a warm start from an earlier fit); the others start from their
+        effect's grid.
+    grid : bool
+        Search the grid of start points of the parameters ``start`` does not give.
+    fixed : tuple of str
+        Nonlinear parameters held at their ``start`` values.
 
     Attributes
     ----------
@@ -72,9 +86,13 @@ class VariableProjection(Estimator):
 
     problem_types: ClassVar[frozenset] = frozenset({"effects"})
 
-    def __init__(self, refine: bool = True, max_evals: int = 100):
+    def __init__(self, refine: bool = True, max_evals: int = 100, start: dict | None = None, grid: bool = True,
+                 fixed: tuple = ()):
         self.refine = refine
         self.max_evals = max_evals
+        self.start = start
+        self.grid = grid
+        self.fixed = fixed
 
     def fit(self, X, y):
         raise NotImplementedError("VariableProjection fits a model with effects (fit_effects), not a regression")
@@ -82,7 +100,8 @@ class VariableProjection(Estimator):
     def fit_effects(self, problem: EffectsProblem, effects=()):
         """Identify ``problem``'s model with ``effects``. Returns ``self``."""
         effects = tuple(effects)
-        fit = problem.fit(effects, refine=bool(self.refine), max_evals=int(self.max_evals))
+        fit = search.fit(problem, effects, dict(self.start) if self.start else None, bool(self.grid),
+                         tuple(self.fixed), bool(self.refine), int(self.max_evals))
         free = problem.free_coefficients(effects)  # coefficient -> equation (the model's and the effects')
         freed = {c: fit.coefs[c] for c in free if c in fit.coefs}
         values = {k: float(v) for k, v in {**problem.describe(fit), **freed}.items() if isinstance(v, (int, float))}
@@ -93,8 +112,13 @@ class VariableProjection(Estimator):
         self.coefficients_ = {k: float(v) for k, v in fit.coefs.items() if k in problem.base.param_names}
         self.diagnostics_ = {"training_error": fit.training_error, "effect_evaluations": fit.evaluations}
         self.fit_, self.problem_, self.effects_ = fit, problem, effects
-        self.vessel_ = problem.vessel(effects, fit.values, None, fit.coefs, replay=False)
         return self
+
+    @property
+    def vessel_(self):
+        """The identified model with its own steering gear, for closed-loop manoeuvres (built when asked: the
+        doctor's many fits never need it)."""
+        return self.problem_.vessel(self.effects_, self.fit_.values, None, self.fit_.coefs, replay=False)
 
     def replay(self, df, meta: dict | None = None, name: str = ""):
         """The identified model replayed through a record (its measured rudder and propeller, its own depth, the
@@ -112,6 +136,15 @@ class VariableProjection(Estimator):
         if model.type != "kind" or structure.simulates:
             return True, "model.effects need a force model (type: kind) and a regression structure"
         return False, ""
+
+
+def identify_effects(problem: EffectsProblem, effects=(), refine: bool = False, max_evals: int = 100,
+                     start: dict | None = None, grid: bool = True, fixed=()) -> Fit:
+    """``problem``'s model identified with ``effects`` by :class:`VariableProjection` through the engine's one
+    entry (``fit_problem``); the search's :class:`~.search.Fit`. The keywords are the estimator's parameters
+    (``refine`` off by default: the doctor polishes on the replays only in its ladder's steps)."""
+    est = VariableProjection(refine=refine, max_evals=max_evals, start=start, grid=grid, fixed=tuple(fixed))
+    return est.fit_problem(ModelWithEffects(problem, tuple(effects))).fit_
 
 
 def hidden_truth(problem: EffectsProblem, vessel) -> dict:

@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 from scipy import linalg
 
-from . import search, uncertainty
+from . import uncertainty
 from .search import Fit
 from ..output_error import initial_value
 from ..regression import kind_regressors
@@ -378,11 +378,6 @@ class EffectsProblem:
     def identifiability(self, fit: Fit) -> list[dict]:
         """Per anchored model coefficient, how far the records determine it (:func:`uncertainty.identifiability`)."""
         return uncertainty.identifiability(self, fit)
-
-    def fit(self, effects, start: dict | None = None, grid: bool = True, fixed=(), refine: bool = False,
-            max_evals: int = 100) -> Fit:
-        """Identify the model with ``effects`` (:func:`search.fit`: each variant fitted, the best kept)."""
-        return search.fit(self, effects, start, grid, fixed, refine, max_evals)
 
     # ------------------------------------------------------------------------------------------- replay
     def predict(self, fit: Fit, df: pd.DataFrame, info: RecordInfo | None = None) -> pd.DataFrame | None:

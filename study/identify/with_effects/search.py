@@ -32,7 +32,7 @@ class Fit:
 
 
 
-#: the local search's evaluations when an effect's variants are screened (see ``EffectsProblem.fit``)
+#: the local search's evaluations when an effect's variants are screened (see :func:`fit`)
 SCREEN_EVALS = 25
 
 

@@ -132,7 +132,8 @@ class Doctor:
                 errors[name] = record_errors(df, self.predict(self.problem, fit, df, info), self.problem.floors)
         else:
             for i, (name, df) in enumerate(zip(self.train_names, self.train_df)):
-                f = identify_effects(self.folds[i], effects, start=fit.outer, grid=False)  # warm start from the full fit
+                # warm start from the full fit
+                f = identify_effects(self.folds[i], effects, start=fit.outer, grid=False)
                 folds.append(f)
                 errors[name] = record_errors(df, self.predict(self.folds[i], f, df, self.problem.infos[i], i),
                                              self.problem.floors)

@@ -249,8 +249,8 @@ def default_alternatives(problem, fit, tie: float = 0.1) -> tuple:
     alts += [pub] if pub else []
     hn = problem.effects.get("hull_nonlinear")
     if hn is not None and "hull_nonlinear" not in fit.effects and hn.applies(problem) is None:
-        other = identify_effects(problem, tuple(fit.effects) + ("hull_nonlinear",), start=dict(fit.outer), grid=False,
-                            fixed=tuple(fit.outer))
+        other = identify_effects(problem, tuple(fit.effects) + ("hull_nonlinear",), start=dict(fit.outer),
+                                 grid=False, fixed=tuple(fit.outer))
         if me.data_error(problem, other) <= (1.0 + tie) * me.data_error(problem, fit):
             alts.append(("with the hull terms the model lacks freed (hull_nonlinear)", problem, other))
         else:

@@ -28,5 +28,5 @@ from .replay_errors import (CHANNELS, NRMSE_CAP, UNITS, diverged_records, record
 from .search import Fit
 
 __all__ = ["CHANNELS", "ENVELOPE", "EQUATIONS", "NRMSE_CAP", "UNITS", "EffectsProblem", "Fit", "ModelWithEffects",
-           "VariableProjection", "as_frame", "identify_effects", "diverged_records", "record_error", "record_errors", "record_h_T",
-           "residuals", "validation_error"]
+           "VariableProjection", "as_frame", "diverged_records", "identify_effects", "record_error", "record_errors",
+           "record_h_T", "residuals", "validation_error"]

@@ -2,8 +2,10 @@
 KVLCC2's MMG hull and the waterjet USV's full model (the ``emcee_calibration_stress`` set-up: 1 % white noise,
 0.005 L/U0), exact and with N'vvr left out, over datasets 1-10. Per equation it prints the largest error of a
 coefficient in posterior sd (``z``, against the vessel's values), the whitened residual's lag-1 autocorrelation
-(what ``study.identify.trust`` checks) and RESET's F (Ramsey 1969: the whitened residual regressed on the square and
-cube of the fitted value, whitened the same way; about 1 for a correct model with white rows).
+(what ``study.identify.trust`` checks), the coefficients' heterogeneity over the quartiles of the fitted value
+(``H``, chi-square per degree of freedom, and its upper tail: ``study.identify.trust.heterogeneity``, also checked)
+and RESET's F (Ramsey 1969: the whitened residual regressed on the square and cube of the fitted value, whitened the
+same way; about 1 for a correct model with white rows).
 
 Run from the repository's root: ``python scripts/probe_missing_term.py [case] [structure]`` (defaults kvlcc2_mmg,
 central); about 2 min per model and omission on one core.
@@ -21,6 +23,7 @@ from omegaconf import OmegaConf  # noqa: E402
 from study.identify.estimators import make_estimator  # noqa: E402
 from study.identify.estimators.prior import gls_posterior  # noqa: E402
 from study.identify.rows import prepare, regression_rows, row_errors, truncation_rows  # noqa: E402
+from study.identify.trust import heterogeneity  # noqa: E402
 from study.pipeline import SimulatedJob  # noqa: E402
 
 
@@ -63,10 +66,11 @@ def probe(case: str, omit: str, structure: str, datasets) -> None:
             if pr.noise_operators.centred:
                 Xc = np.column_stack([Xc, np.ones(len(yc))])
             yh = Xc[:, :k] @ mean
+            H, tail = heterogeneity(noise.whiten(Xc), noise.whiten(yc), yh)
             yh = yh / (np.std(yh) or 1.0)
             F = reset_f(noise.whiten(Xc), noise.whiten(yc), np.column_stack([noise.whiten(yh ** 2),
                                                                             noise.whiten(yh ** 3)]))
-            out.append(f"{eq}: z={z:5.1f} acf1={diag['whitened_acf1']:+.2f} F={F:6.1f}")
+            out.append(f"{eq}: z={z:5.1f} acf1={diag['whitened_acf1']:+.2f} H={H:5.2f} (p {tail:.0e}) F={F:6.1f}")
         print(f"{case} {structure} omit={omit} dataset {s}: " + " | ".join(out), flush=True)
 
 

@@ -1,6 +1,11 @@
 """The trust verdict of an emcee regression run (study/identify/trust.py): a residual that is not white, after the
-fitted noise model's whitening, is no noise the intervals cover."""
-from study.identify.trust import ACF_LIMIT, run_verdict, whiteness
+fitted noise model's whitening, is no noise the intervals cover; coefficients that differ where the states are small
+and where they are large say the model lacks a term."""
+import numpy as np
+import pytest
+from scipy import stats
+
+from study.identify.trust import ACF_LIMIT, HETEROGENEITY_P, heterogeneity, run_verdict, whiteness
 
 
 def test_a_white_residual_leaves_the_truncation_verdict_alone():
@@ -24,3 +29,46 @@ def test_the_limit_is_an_effect_size_on_either_side():
 
 def test_the_iid_likelihood_is_never_trusted_whatever_its_residual():
     assert not run_verdict("regression_iid", "central", {}, 0, False, {"est_N_whitened_acf1": 0.0})[0]
+
+
+def _rows(seed: int, missing: float, n: int = 4000):
+    """Rows of y = 1.0 v - 0.5 r + 0.3 v^3 (+ ``missing`` v^2 r, a term the model lacks) + white noise, for a model
+    with v, r and v^3 only: the missing term is absorbed by the others, unequally across their range."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 200, n)
+    v = 0.4 * np.sin(0.11 * t) + 0.1 * rng.standard_normal(n)
+    r = 0.5 * np.sin(0.11 * t + 0.8) + 0.1 * rng.standard_normal(n)
+    X = np.column_stack([v, r, v ** 3])
+    y = X @ np.array([1.0, -0.5, 0.3]) + missing * v ** 2 * r + 0.05 * rng.standard_normal(n)
+    beta = np.linalg.lstsq(X, y, rcond=None)[0]
+    return X, y, X @ beta
+
+
+def test_heterogeneity_is_a_calibrated_test_where_the_model_holds():
+    tails = [heterogeneity(*_rows(s, 0.0))[1] for s in range(200)]
+    # uniform where the model holds: about 10 % of the tails below 0.1, none below the flag's 0.1 %
+    assert 0.04 < np.mean(np.array(tails) < 0.1) < 0.18
+    assert stats.kstest(tails, "uniform").pvalue > 1e-3
+
+
+def test_heterogeneity_finds_a_missing_term_the_residual_does_not_show():
+    per_dof, tail = heterogeneity(*_rows(0, 2.0))
+    assert per_dof > 5 and tail < HETEROGENEITY_P
+
+
+def test_heterogeneity_needs_more_rows_than_coefficients_in_each_group():
+    X, y, f = _rows(0, 0.0, n=10)
+    assert all(np.isnan(heterogeneity(X, y, f)))
+
+
+def test_a_heterogeneous_run_is_flagged_naming_its_equation():
+    m = {"est_N_whitened_acf1": 0.01, "est_N_heterogeneity": 3.9, "est_N_heterogeneity_p": 1e-9,
+         "est_Y_heterogeneity": 1.1, "est_Y_heterogeneity_p": 0.3}
+    ok, note = run_verdict("regression", "central", {"K": 0.1}, 0, True, m)
+    assert not ok and "chi-square 3.90 per degree of freedom in equation N" in note
+
+
+@pytest.mark.parametrize("tail, trusted", [(HETEROGENEITY_P * 0.99, False), (HETEROGENEITY_P * 1.01, True)])
+def test_the_heterogeneity_flag_is_the_test_level(tail, trusted):
+    m = {"est_X_heterogeneity": 2.0, "est_X_heterogeneity_p": tail}
+    assert run_verdict("regression", "central", {}, 0, True, m)[0] is trusted

@@ -18,6 +18,7 @@ import numpy as np
 from scipy import linalg
 
 from ..row_errors import N_PROBES
+from ..trust import heterogeneity
 from .base import Estimator, as_arrays
 
 
@@ -297,6 +298,14 @@ class EmceeSampler(Estimator):
             mean, cov, diag, self.row_noise_ = self.gaussian_regression(X, y, noise_operators, errors=errors)
             self._sample_gaussian(mean, cov, names, progress)
             self.diagnostics_.update(diag)
+            if self.row_noise_ is not None:  # for the trust verdict: do the coefficients hold over the records?
+                Xc, yc = errors.corrected(X, y) if errors is not None else (X, y)
+                fitted = Xc @ mean
+                if noise_operators.centred:  # the centring's intercept, as gls_posterior fits it
+                    Xc = np.column_stack([Xc, np.ones(len(yc))])
+                w = self.row_noise_.whiten
+                per_dof, tail = heterogeneity(w(Xc), w(yc), fitted)
+                self.diagnostics_.update(heterogeneity=per_dof, heterogeneity_p=tail)
             return self
         ls, _, rank, _ = linalg.lstsq(X, y, lapack_driver="gelsd")
         if rank < k:

@@ -173,7 +173,7 @@ def claim(cov: pd.DataFrame, own: pd.DataFrame | None = None) -> list:
     """(a) the regression likelihood's intervals are calibrated on each model and structure where its assumptions
     hold; (b) wherever a run says its intervals are trusted they cover 80-97 % (every condition), and runs are
     flagged where the assumptions fail; (c) where the model lacks a term, the trusted runs' intervals cover the
-    model's own best fit (what "trusted" can promise: the flag cannot see a term the model's others absorb)."""
+    model's own best fit (what "trusted" can promise where the flag misses a term the model's others absorb)."""
     out = []
     allr = cov[cov["runs"] == "all"]
     nom = allr[allr["condition"] == "as assumed"]

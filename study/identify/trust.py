@@ -51,9 +51,10 @@ HETEROGENEITY_GROUPS = 4
 #: that holds, p coefficients) has an upper tail below this. A test, not an effect size: the statistic is already in
 #: units of the groups' own posterior spread, which is what an interval's coverage depends on; 0.1 % per equation
 #: keeps false flags rare over a study's thousands of equations. Measured (``scripts/probe_missing_term.py``;
-#: KVLCC2's MMG hull and the waterjet USV's full model, central rows, 1 % white noise, 0.005 L/U0, datasets 1-4,
-#: every equation), as chi-square per degree of freedom: 0.49-2.19 with the exact model (the 0.1 % point is 2.35
-#: for p = 6); without N'vvr, equation N, 1.76-3.91 (KVLCC2) and 9.9-15.7 (USV)
+#: KVLCC2's MMG hull and the waterjet USV's full model, central rows, 1 % white noise, 0.005 L/U0, half-length
+#: manoeuvres, datasets 1-10, every equation), as chi-square per degree of freedom: 0.5-1.5 (KVLCC2) and 0.6-2.6
+#: (USV) with the exact model, one USV yaw equation of twenty beyond the level; without N'vvr, equation N, 1.8-3.4
+#: (KVLCC2, eight of ten flagged) and 8-14 (USV, every one flagged)
 HETEROGENEITY_P = 1e-3
 
 #: a reported parameter biased by more than this many posterior sd: the intervals are not trusted
@@ -104,8 +105,8 @@ def heterogeneity(Xw: np.ndarray, yw: np.ndarray, fitted: np.ndarray,
     rows: the rows ``Xw``, ``yw`` (whitened by the run's row-noise model) split into ``groups`` of equal size by
     ``|fitted|`` (the rows' fitted value before whitening), least squares on each, and the chi-square of the
     groups' estimates about their precision-weighted mean, sum_g (b_g - b)' P_g (b_g - b) with P_g the group's
-    precision (its rows' X'X over their residual variance), on (groups - 1) p degrees of freedom. About 1 and
-    uniform where the model holds; NaNs when a group has no more rows than coefficients or no residual."""
+    sandwich precision, on (groups - 1) p degrees of freedom. About 1 and its tail uniform where the model holds;
+    NaNs when a group has no more rows than coefficients or no residual."""
     Xw, yw = np.asarray(Xw, float), np.asarray(yw, float)
     p = Xw.shape[1]
     nan = (float("nan"), float("nan"))
@@ -117,11 +118,17 @@ def heterogeneity(Xw: np.ndarray, yw: np.ndarray, fitted: np.ndarray,
             return nan
         beta = np.linalg.lstsq(A, b, rcond=None)[0]
         r = b - A @ beta
-        s2 = float(r @ r) / (len(idx) - p)
-        if not s2 > 0:
+        if not float(r @ r) > 0:
+            return nan
+        # the sandwich (HC1: White 1980) precision, as the posterior's own: rows whose residual's size varies with
+        # the states would make the plain least-squares precision overstate the groups' disagreement
+        meat = (A * (r ** 2)[:, None]).T @ A * (len(idx) / (len(idx) - p))
+        AtA = A.T @ A
+        try:
+            prec.append(AtA @ np.linalg.solve(meat, AtA))
+        except np.linalg.LinAlgError:
             return nan
         est.append(beta)
-        prec.append(A.T @ A / s2)
     try:
         pooled = np.linalg.solve(sum(prec), sum(P @ b for P, b in zip(prec, est)))
     except np.linalg.LinAlgError:

@@ -169,6 +169,8 @@ def test_emcee_samples_the_closed_form_posterior(kt):
     for seed in (1, 2):
         ident = identify(kt.model, st, cfg, cal.records(kt, seed), seed=seed)
         assert ident.metrics["est_N_whitened"] == 1.0 and ident.metrics["est_N_converged"] == 1.0
+        # the exact model's coefficients hold over its records' range (the trust verdict's heterogeneity check)
+        assert 0.0 < ident.metrics["est_N_heterogeneity"] and 1e-3 < ident.metrics["est_N_heterogeneity_p"] <= 1.0
         ref = {r["name"]: r for r in cal.dataset_intervals(kt, st, seed, draws=40000)}
         for p in ident.params:
             r = ref[p["name"]]

@@ -6,10 +6,11 @@ effects' catalogue) and the effects to identify. The rows depend on the effects'
 problem is no regression problem: the estimator declares the problem type ``"effects"`` and
 ``Estimator.fit_problem`` hands it to :meth:`VariableProjection.fit_effects`.
 
-It is the one way a model with effects is identified: a study run (``study.identify.fit``) and the model doctor
-(its ranking, ladder, folds and refits, through :func:`identify_effects`) both come here. The doctor fits one
-problem many times; the problem keeps its caches (rows, replays) between fits, and the estimator's ``start``,
-``grid`` and ``fixed`` carry a warm start from one fit to the next.
+It is the one way a model with effects is identified: a study run (``study.identify.fit``, through
+``fit_problem``) and the model doctor (its ranking, ladder, folds and refits, through :func:`identify_effects`)
+both come to :meth:`VariableProjection.fit_effects`. The doctor fits one problem many times; the problem keeps its
+caches (rows, replays) between fits, and ``fit_effects``'s ``start``, ``grid`` and ``fixed`` carry a warm start
+from one fit to the next.
 """
 from __future__ import annotations
 
@@ -56,13 +57,6 @@ class VariableProjection(Estimator):
         Polish the nonlinear parameters on the training records' replays.
     max_evals : int
         Evaluations of each local search.
-    start : dict or None
-        Start values of nonlinear parameters (a warm start from an earlier fit); the others start from their
-        effect's grid.
-    grid : bool
-        Search the grid of start points of the parameters ``start`` does not give.
-    fixed : tuple of str
-        Nonlinear parameters held at their ``start`` values.
 
     Attributes
     ----------
@@ -86,22 +80,23 @@ class VariableProjection(Estimator):
 
     problem_types: ClassVar[frozenset] = frozenset({"effects"})
 
-    def __init__(self, refine: bool = True, max_evals: int = 100, start: dict | None = None, grid: bool = True,
-                 fixed: tuple = ()):
+    def __init__(self, refine: bool = True, max_evals: int = 100):
         self.refine = refine
         self.max_evals = max_evals
-        self.start = start
-        self.grid = grid
-        self.fixed = fixed
 
     def fit(self, X, y):
         raise NotImplementedError("VariableProjection fits a model with effects (fit_effects), not a regression")
 
-    def fit_effects(self, problem: EffectsProblem, effects=()):
-        """Identify ``problem``'s model with ``effects``. Returns ``self``."""
+    def fit_effects(self, problem: EffectsProblem, effects=(), start: dict | None = None, grid: bool = True,
+                    fixed=()):
+        """Identify ``problem``'s model with ``effects``. Returns ``self``.
+
+        ``start``: values of nonlinear parameters to start from (a warm start from an earlier fit; the others start
+        from their effect's grid); ``grid``: search the grid of start points of those ``start`` does not give;
+        ``fixed``: nonlinear parameters held at their ``start`` values. ``fit_problem`` fits from the grids."""
         effects = tuple(effects)
-        fit = search.fit(problem, effects, dict(self.start) if self.start else None, bool(self.grid),
-                         tuple(self.fixed), bool(self.refine), int(self.max_evals))
+        fit = search.fit(problem, effects, dict(start) if start else None, bool(grid), tuple(fixed),
+                         bool(self.refine), int(self.max_evals))
         free = problem.free_coefficients(effects)  # coefficient -> equation (the model's and the effects')
         freed = {c: fit.coefs[c] for c in free if c in fit.coefs}
         values = {k: float(v) for k, v in {**problem.describe(fit), **freed}.items() if isinstance(v, (int, float))}
@@ -140,11 +135,13 @@ class VariableProjection(Estimator):
 
 def identify_effects(problem: EffectsProblem, effects=(), refine: bool = False, max_evals: int = 100,
                      start: dict | None = None, grid: bool = True, fixed=()) -> Fit:
-    """``problem``'s model identified with ``effects`` by :class:`VariableProjection` through the engine's one
-    entry (``fit_problem``); the search's :class:`~.search.Fit`. The keywords are the estimator's parameters
-    (``refine`` off by default: the doctor polishes on the replays only in its ladder's steps)."""
-    est = VariableProjection(refine=refine, max_evals=max_evals, start=start, grid=grid, fixed=tuple(fixed))
-    return est.fit_problem(ModelWithEffects(problem, tuple(effects))).fit_
+    """``problem``'s model identified with ``effects`` by :class:`VariableProjection` (the estimator's
+    ``fit_effects``, where ``fit_problem`` sends a study run's model with effects), with a warm start; the search's
+    :class:`~.search.Fit`. ``refine``, ``max_evals``: the estimator's parameters (``refine`` off by default: the
+    doctor polishes on the replays only in its ladder's steps); ``start``, ``grid``, ``fixed``: see
+    :meth:`VariableProjection.fit_effects`."""
+    est = VariableProjection(refine=refine, max_evals=max_evals)
+    return est.fit_effects(problem, effects, start=start, grid=grid, fixed=fixed).fit_
 
 
 def hidden_truth(problem: EffectsProblem, vessel) -> dict:

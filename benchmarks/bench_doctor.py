@@ -26,9 +26,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from study.doctor.diagnose import Doctor  # noqa: E402
-from study.measure import MeasurementModel  # noqa: E402
-from study.pipeline import resolve_effects  # noqa: E402
-from study.config import read_config  # noqa: E402
+from study.records.measure import MeasurementModel
+from study.run.pipeline import resolve_effects
+from study.configuration.compose import read_config
 from study.sim import load_vessel, simulate  # noqa: E402
 
 TARGET_S = 120.0

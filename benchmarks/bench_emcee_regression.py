@@ -18,7 +18,7 @@ Per fit (one equation): wall and CPU time of the whole fit (the closed form incl
 (the fit less the closed form, timed separately, each with its own code), steps, acceptance, tau, ESS; per
 problem the ratio new / old.
 Posterior: per coefficient the chain's median and 5 %, 95 % quantiles against the closed form's (normal: mean,
-mean -+ 1.645 sd; ``regression_iid``: the normal at its most probable noise scale, ``study.calibration``), in
+mean -+ 1.645 sd; ``regression_iid``: the normal at its most probable noise scale, ``study.run.calibration``), in
 units of their Monte Carlo standard error at the chain's reported ESS (1.25 / sqrt(ESS) posterior sd for the
 median, 2.11 / sqrt(ESS) for a 5 % quantile): within about 3 of them for 11-15 coefficients if the chain samples
 the closed form and its ESS is honest.
@@ -53,12 +53,12 @@ SE_MEDIAN, SE_Q05 = 1.2533, 2.1132  # Monte Carlo sd of a median, of a 5 % quant
 
 def grand_problem(case: str, sample_dt_LU: float, seed: int = 0):
     """(model, structure, records, estimator config) of one grand job: ``case``, central rows, medium relative
-    noise, deep water, emcee with grand's overrides (what ``study.pipeline.run_study`` builds)."""
-    from study.config import compose
+    noise, deep water, emcee with grand's overrides (what ``study.run.pipeline.run_study`` builds)."""
+    from study.configuration.compose import compose
     from study.identify.models import make_model
     from study.identify.structures import make_structure
-    from study.pipeline import measurement, simulate_set, vessels_for
-    from study.run_common import estimator_config
+    from study.run.pipeline import measurement, simulate_set, vessels_for
+    from study.run.common import estimator_config
 
     conf = compose("config", ["experiment=grand", f"case={case}", "structure=central", "noise=medium_relative",
                               f"noise.sample_dt_LU={sample_dt_LU}", "depth=deep", "estimator=emcee"])
@@ -71,7 +71,7 @@ def grand_problem(case: str, sample_dt_LU: float, seed: int = 0):
 
 def closed_form(est, X, y, ops, likelihood, prior=None):
     """(mean, sd) of the posterior in closed form, and its wall time."""
-    from study import calibration as cal
+    from study.run import calibration as cal
     from study.identify.estimators.prior import gaussian_posterior
 
     t0 = time.perf_counter()

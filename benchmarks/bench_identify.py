@@ -43,8 +43,8 @@ from study.identify.fit import identify  # noqa: E402
 from study.identify.rows import prepare  # noqa: E402
 from study.identify.models import make_model  # noqa: E402
 from study.identify.structures import make_structure  # noqa: E402
-from study.measure import MeasurementModel  # noqa: E402
-from study.config import read_config  # noqa: E402
+from study.records.measure import MeasurementModel
+from study.configuration.compose import read_config
 from study.sim import load_vessel, simulate  # noqa: E402
 
 TARGETS_S = {"ls": 0.05, "ridge": 0.05, "lssvm": 0.05, "tlssvm": 0.05, "svr_eps": 10.0, "svr_nu": 10.0,

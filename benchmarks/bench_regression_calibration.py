@@ -1,5 +1,5 @@
 """Calibration of emcee's regression posteriors, per structure and likelihood, on the study's own simulated cases
-(``study.calibration``: the posteriors in closed form, as ``EmceeSampler.fit`` samples them).
+(``study.run.calibration``: the posteriors in closed form, as ``EmceeSampler.fit`` samples them).
 
 Cases (1 % white noise on every channel, ``noise=low``; trajectories fixed, the noise drawn afresh per dataset):
 
@@ -41,8 +41,8 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from study import calibration as cal  # noqa: E402
-from study.config import read_config  # noqa: E402
+from study.run import calibration as cal
+from study.configuration.compose import read_config
 
 DIFF_NOSPLIT = {**read_config("structure", "diff_center"), "name": "diff_center_nosplit", "split": {}, "clean": {}}
 STRUCTURES = ["euler", "central", "integral", "smoothed", "diff_center", DIFF_NOSPLIT]

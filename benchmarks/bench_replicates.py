@@ -107,7 +107,7 @@ def study_cells(name: str) -> tuple[list[list[str]], int]:
     from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
-    from study.config import read_config
+    from study.configuration.compose import read_config
 
     parser = OverridesParser.create()
 
@@ -128,9 +128,9 @@ def study_cells(name: str) -> tuple[list[list[str]], int]:
 
 def _stage_times(overrides: list[str]) -> dict:
     """Compose one cell; time its shared work and two datasets. Seconds of each stage."""
-    from study.config import compose
-    from study.executor import Replicate, dataset_seed
-    from study.pipeline import SimulatedJob
+    from study.configuration.compose import compose
+    from study.run.executor import Replicate, dataset_seed
+    from study.run.pipeline import SimulatedJob
 
     t0 = time.perf_counter()
     conf = compose("config", [*overrides, "progress=false"])
@@ -225,7 +225,7 @@ def main() -> None:
     ap.add_argument("--studies", default=None, help="comma-separated studies for part 3 (default: all named)")
     args = ap.parse_args()
     parts = {int(p) for p in args.parts.split(",")}
-    import study.app  # noqa: F401  (registers the project's Hydra plugins, as the app does)
+    import study.commands.app
 
     res: dict = {"machine": {"platform": platform.platform(), "cpus": os.cpu_count(), "python": sys.version.split()[0]}}
     if 1 in parts:
@@ -239,7 +239,7 @@ def main() -> None:
                                                            "estimator.params.target_ess=400"], 5,
                                      args.repeat)]
     if 3 in parts:
-        from study.config import simulated_studies
+        from study.configuration.compose import simulated_studies
 
         names = args.studies.split(",") if args.studies else sorted(s for s in simulated_studies() if s != "smoke")
         rng = random.Random(0)

@@ -5,7 +5,7 @@ Workload: N synthetic records shaped like a real run's (the default configuratio
 varied; 165 metrics, 17 parameters, about 17 kB each), in a temp folder. Timed, best of ``--repeat``:
 
 * ``tables``: build both tables from the records (what ``collect`` and ``show`` do), this version and the
-  baseline version of ``study/results.py`` (read from git, ``--baseline``; default: the commit before);
+  baseline version of ``study/commands/results.py`` (read from git, ``--baseline``; default: the commit before);
 * ``collect``: this version, tables written (plus the crash-leftover scan);
 * ``fingerprint``: the code fingerprint of one run, first call in a process and cached.
 
@@ -28,14 +28,14 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from study import fingerprint  # noqa: E402
+from study.store import fingerprint
 from study import store as R  # noqa: E402
 
 BASELINE = "62b33f6"  # the commit before canonical run ids, code fingerprints and record checks
 
 
 def baseline_module(rev: str):
-    src = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:study/results.py"], capture_output=True,
+    src = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:study/commands/results.py"], capture_output=True,
                          text=True, check=True).stdout
     path = Path(tempfile.mkdtemp()) / "results_baseline.py"
     path.write_text(src)

@@ -28,8 +28,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from study import calibration as cal  # noqa: E402
-from study.config import read_config  # noqa: E402
+from study.run import calibration as cal
+from study.configuration.compose import read_config
 from study.identify.fit import identify  # noqa: E402
 from study.identify.structures import make_structure  # noqa: E402
 

@@ -44,7 +44,7 @@ import numpy as np  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from study.maneuvers import get_maneuver, open_loop_ctrl  # noqa: E402
+from study.sim.maneuvers import get_maneuver, open_loop_ctrl
 from study.sim import initial_state, load_vessel, run  # noqa: E402
 from study.sim.core import ENV_NAMES  # noqa: E402
 
@@ -89,7 +89,7 @@ import time
 t0 = time.perf_counter()
 import numpy as np
 from study.sim import load_vessel, run, initial_state
-from study.maneuvers import get_maneuver
+from study.sim.maneuvers import get_maneuver
 v = load_vessel("kvlcc2")
 ctrl, cmd = get_maneuver("seed000_sequence").encode(v, 0.1, 10)
 t1 = time.perf_counter()

@@ -1,4 +1,4 @@
-"""Benchmark of the state estimator (``study.state_estimation``) against Savitzky-Golay, in one run.
+"""Benchmark of the state estimator (``study.records.state_estimation``) against Savitzky-Golay, in one run.
 
 Workload: a 35 deg turning circle of the 3 m Esso Osaka model at 10 Hz (positions 1.5 cm, heading 0.15 deg
 noise), simulated for 1,000, 4,000 and 16,000 samples (the ship keeps circling), and the 320 m KVLCC2's
@@ -29,9 +29,9 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from study.state_estimation import estimate_states  # noqa: E402
+from study.records.state_estimation import estimate_states
 from study.identify.structures import savgol_interior  # noqa: E402
-from study.measure import MeasurementModel  # noqa: E402
+from study.records.measure import MeasurementModel
 from study.sim import load_vessel, simulate  # noqa: E402
 
 OUT = Path(__file__).resolve().parent / "results" / "bench_state_estimation.json"

@@ -57,7 +57,7 @@ TARGETS = {"startup_s": 2.0, "emcee_oe_s": 120.0, "grand_s": 600.0}
 READY_CHILD = r"""
 import time
 t0 = time.perf_counter()
-import study.app, study.pipeline, study.identify.fit, study.results  # what a worker imports
+import study.commands.app, study.run.pipeline, study.identify.fit, study.commands.results  # what a worker imports
 c1 = time.process_time(); t1 = time.perf_counter()
 from study.sim import accelerations, integrator, load_vessel
 v = load_vessel("kvlcc2")  # MMG self-propulsion

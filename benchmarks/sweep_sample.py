@@ -20,9 +20,9 @@ sys.path.insert(0, str(ROOT))
 from hydra import compose, initialize_config_dir  # noqa: E402
 from omegaconf import OmegaConf  # noqa: E402
 
-import study.app  # noqa: E402,F401  (registers the sweeper plugin, as the app does)
-from study.pipeline import run_study, study_config  # noqa: E402
-from study.executor import run_guarded  # noqa: E402
+import study.commands.app
+from study.run.pipeline import run_study, study_config
+from study.run.executor import run_guarded
 from study.store import ResultStore  # noqa: E402
 
 

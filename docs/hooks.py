@@ -1,4 +1,4 @@
-"""MkDocs hook: the figures the pages show are the ones in ``paper_figs/`` (rebuilt by ``python -m study.figures``),
+"""MkDocs hook: the figures the pages show are the ones in ``paper_figs/`` (rebuilt by ``python -m study figures``),
 added to the site as they are instead of being copied into ``docs/``. Only the figures a page references."""
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Equivalence check of study runs with ``model.effects`` and of runs on records, across two versions of the code.
 
 A sibling of ``scripts/engine_equivalence.py`` (which checks ``identify`` itself): here whole runs go through
-``study.pipeline.run_study``, so the branch a run takes on ``model.effects`` (simulated and on records), the
+``study.run.pipeline.run_study``, so the branch a run takes on ``model.effects`` (simulated and on records), the
 rows it writes and its validation are compared. Per configuration the run's ``status``, ``error``, ``metrics``,
 ``params`` and the sha256 of every artefact are dumped (timings left out); ``compare`` reports the differences
 exactly (floats bit for bit, NaN equal to NaN), metric by metric.
@@ -63,7 +63,7 @@ def _compose(name: str, overrides: list) -> dict:
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    from study.app import CONF_DIR
+    from study.commands.app import CONF_DIR
 
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         cfg = compose(config_name=name, overrides=overrides)
@@ -72,8 +72,8 @@ def _compose(name: str, overrides: list) -> dict:
 
 def write_records(folder: Path) -> None:
     """The runs on files' records (KVLCC2, noise-free, 0.5 s), written once."""
-    from study.schema import write_record
-    from study.simulate import make_record
+    from study.records.schema import write_record
+    from study.commands.simulate import make_record
 
     folder.mkdir(parents=True, exist_ok=True)
     for name, (man, seed) in {**TRAIN, **VALIDATE}.items():
@@ -93,7 +93,7 @@ def configurations(records: Path) -> dict:
 
 
 def run_one(overrides: list) -> dict:
-    from study.pipeline import run_study, study_config
+    from study.run.pipeline import run_study, study_config
 
     conf = _compose("config", overrides)
     conf["progress"] = False

@@ -76,7 +76,7 @@ def _conf(overrides: list) -> dict:
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    from study.app import CONF_DIR
+    from study.commands.app import CONF_DIR
 
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         cfg = compose(config_name="config", overrides=["experiment=tiny", "noise=low_relative", *overrides])
@@ -88,7 +88,7 @@ def _conf(overrides: list) -> dict:
 def run_one(overrides: list) -> dict:
     """The identification of one configuration, as plain data (or the reason it was skipped or failed)."""
     from study.identify.fit import identify
-    from study.pipeline import SimulatedJob
+    from study.run.pipeline import SimulatedJob
 
     job = SimulatedJob(_conf(overrides))
     skipped = job.prepare()

@@ -24,7 +24,7 @@ from study.identify.estimators import make_estimator  # noqa: E402
 from study.identify.estimators.prior import gls_posterior  # noqa: E402
 from study.identify.rows import prepare, regression_rows, row_errors, truncation_rows  # noqa: E402
 from study.identify.trust import heterogeneity  # noqa: E402
-from study.pipeline import SimulatedJob  # noqa: E402
+from study.run.pipeline import SimulatedJob
 
 
 def compose_run(case: str, omit: str, structure: str) -> dict:

@@ -22,11 +22,11 @@ sys.path.insert(0, str(ROOT / "tests"))  # the hidden-effect records of the doct
 import numpy as np  # noqa: E402
 from doctor_cases import MMG_HULL, VESSEL, make_records, perturbed_prior  # noqa: E402
 
-from study.config import read_config  # noqa: E402
+from study.configuration.compose import read_config
 from study.doctor.diagnose import Doctor, Options  # noqa: E402
-from study.measure import MeasurementModel  # noqa: E402
-from study.pipeline import resolve_effects  # noqa: E402
-from study.schema import read_records  # noqa: E402
+from study.records.measure import MeasurementModel
+from study.run.pipeline import resolve_effects
+from study.records.schema import read_records
 from study.sim import load_vessel, simulate  # noqa: E402
 
 FULL = read_config("vessel", "kvlcc2")

@@ -1,5 +1,6 @@
-from study.app import main, precheck
-from study.cli import run_hydra
+import sys
+
+from study.commands import dispatch
 
 if __name__ == "__main__":
-    run_hydra(main, "study", precheck)
+    dispatch(sys.argv)

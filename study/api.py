@@ -3,20 +3,20 @@
 Each verb reads its configurations by name from ``conf/`` (the same names as on the command line: ``vessel=kvlcc2``
 is ``vessel="kvlcc2"``) and imports what it needs when it is called, so ``import study`` stays fast. The names pair
 a verb with its object (``simulate_maneuver``, ``identify_model``): the bare verbs are taken by the package's
-modules (``study.simulate``, ``study.identify``, ``study.measure``, ``study.diagnose``).
+modules and commands (``study.identify``, ``study.records.measure``, ``python -m study simulate``, ``diagnose``).
 
 =========================  ============================================================================
 verb                       what it wraps
 =========================  ============================================================================
 ``load_vessel``            ``study.sim.load_vessel``
-``load_records``           ``study.loaders.load_records`` (schema files, HSVA ``.dat``, Esso Osaka CSVs)
-``real_data_dir``          ``study.loaders.real_data_dir``
+``load_records``           ``study.records.loaders.load_records`` (schema files, HSVA ``.dat``, Esso Osaka CSVs)
+``real_data_dir``          ``study.records.loaders.real_data_dir``
 ``simulate_maneuver``      ``study.sim.simulate``
-``measure_record``         ``study.pipeline.measurement`` and ``study.measure.MeasurementModel.apply``
+``measure_record``         ``study.run.pipeline.measurement`` and ``study.records.measure.MeasurementModel.apply``
 ``identify_model``         ``study.identify.fit.identify`` with ``make_model`` and ``make_structure``
 ``predict``                ``study.sim.simulate`` of the identified model's vessel
 ``replay_record``          ``study.sim.replay``: open loop with a record's measured rudder and propeller
-``diagnose_records``       ``study.doctor.run.run`` (what ``python -m study.diagnose`` calls)
+``diagnose_records``       ``study.doctor.run.run`` (what ``python -m study diagnose`` calls)
 ``read_results``           the results store's parquet tables
 ``read_posterior``         ``study.identify.posterior``: an emcee run's chains as ArviZ ``InferenceData``
 =========================  ============================================================================
@@ -43,7 +43,7 @@ def _vessel(vessel, effects=()):
 
 
 def _frame(record):
-    """The data of a record: a ``study.schema.Record`` or a DataFrame in the record schema."""
+    """The data of a record: a ``study.records.schema.Record`` or a DataFrame in the record schema."""
     return record.data if hasattr(record, "data") and hasattr(record, "meta") else record
 
 
@@ -91,11 +91,11 @@ def load_records(spec, states: str = "measured", state_options: dict | None = No
         lacks them (``auto``), or always estimated, measured ones refined (``ekf``; extended Kalman filter and
         Rauch-Tung-Striebel smoother).
     state_options : dict, optional
-        The state estimator's options (``study.state_estimation``).
+        The state estimator's options (``study.records.state_estimation``).
 
     Returns
     -------
-    list of study.schema.Record
+    list of study.records.schema.Record
         Each with ``data`` (a DataFrame in the record schema), ``meta`` and ``path``.
 
     Examples
@@ -111,7 +111,7 @@ def load_records(spec, states: str = "measured", state_options: dict | None = No
     >>> all(c in recs[0].data for c in ("time", "u", "v", "r", "psi", "delta", "n"))
     True
     """
-    from .loaders import load_records as _load
+    from study.records.loaders import load_records as _load
 
     return _load(spec, states=states, state_options=state_options)
 
@@ -131,7 +131,7 @@ def real_data_dir():
     >>> study.real_data_dir().name
     'real'
     """
-    from .loaders import real_data_dir as _dir
+    from study.records.loaders import real_data_dir as _dir
 
     return _dir()
 
@@ -183,7 +183,7 @@ def measure_record(record, noise: str | dict = "low", *, vessel=None, sample_dt:
 
     Parameters
     ----------
-    record : pandas.DataFrame or study.schema.Record
+    record : pandas.DataFrame or study.records.schema.Record
         A record in the schema, e.g. from :func:`simulate_maneuver`.
     noise : str or dict
         A noise config of ``conf/noise/`` (``none``, ``low``, ``medium``, ``high``, ``low_relative``, ...;
@@ -210,8 +210,8 @@ def measure_record(record, noise: str | dict = "low", *, vessel=None, sample_dt:
     >>> bool((noisy["psi"] != clean["psi"].iloc[::5].to_numpy()).all())
     True
     """
-    from .config import read_config
-    from .pipeline import measurement
+    from study.configuration.compose import read_config
+    from study.run.pipeline import measurement
 
     nz = dict(read_config("noise", noise) if isinstance(noise, str) else noise)
     if sample_dt is not None:
@@ -258,7 +258,7 @@ def identify_model(records, vessel, model: str | dict = "mmg_hull", structure: s
 
     Parameters
     ----------
-    records : list of pandas.DataFrame or study.schema.Record
+    records : list of pandas.DataFrame or study.records.schema.Record
         Training records in the schema (measured, or from :func:`measure_record`).
     vessel : str, dict or study.sim.Vessel
         The vessel whose known parts (mass, propeller, rudder) the model keeps; its coefficients are the
@@ -303,12 +303,12 @@ def identify_model(records, vessel, model: str | dict = "mmg_hull", structure: s
     """
     import pandas as pd
 
-    from .config import read_config
+    from study.configuration.compose import read_config
     from .identify.estimators import make_estimator
     from .identify.fit import identify
     from .identify.models import make_model
     from .identify.structures import make_structure
-    from .run_common import skip_reason
+    from study.run.common import skip_reason
 
     base = _vessel(vessel)
     mdl = make_model(model, base)
@@ -322,7 +322,7 @@ def identify_model(records, vessel, model: str | dict = "mmg_hull", structure: s
                          f"estimator {est_cfg.get('name')}: {why}")
     res = identify(mdl, st, est_cfg, [_frame(r) for r in records], seed=seed, progress=progress)
     rows = pd.DataFrame(res.params)
-    if "truth" in rows:  # as params.parquet has it (study.results): NaN where the truth is unknown or zero
+    if "truth" in rows:  # as params.parquet has it (python -m study results): NaN where the truth is unknown or zero
         t = pd.to_numeric(rows["truth"], errors="coerce")
         rows["rel_error"] = (pd.to_numeric(rows["estimate"], errors="coerce") - t) / t.abs().where(t != 0)
     finite = all(v is not None and v == v and abs(v) != float("inf") for v in res.estimates.values())
@@ -374,7 +374,7 @@ def replay_record(vessel, record, *, substeps: int = 1):
     ----------
     vessel : str, dict, study.sim.Vessel or Identified
         The model to replay.
-    record : pandas.DataFrame or study.schema.Record
+    record : pandas.DataFrame or study.records.schema.Record
         A uniformly sampled record with ``time``, ``u``, ``v``, ``r``, ``x0``, ``y0``, ``psi``, ``delta`` and
         ``n`` (without ``n``: the vessel's ``n0``).
     substeps : int
@@ -412,7 +412,7 @@ def diagnose_records(train, validate=None, *, vessel: str = "kvlcc2_l7", model: 
                      out="doctor_report", overwrite: bool = False, candidates=None, **settings) -> dict:
     """The model doctor: where a model fails against measured records, and which physical effect is missing.
 
-    The same as ``python -m study.diagnose train=... validate=... vessel=... model=... out=...``: the report is
+    The same as ``python -m study diagnose train=... validate=... vessel=... model=... out=...``: the report is
     written to ``out`` (``report.json``, ``report.html``, ``figures/``) and returned as a dict. Its runs are not
     logged in a results table unless ``log_runs=True`` is given.
 
@@ -446,7 +446,7 @@ def diagnose_records(train, validate=None, *, vessel: str = "kvlcc2_l7", model: 
 
     >>> import tempfile, pathlib
     >>> import study
-    >>> from study.schema import Record, write_record
+    >>> from study.records.schema import Record, write_record
     >>> bias = [{"name": "yaw_bias", "Y": 0.0, "N": -7e-4}]
     >>> d = pathlib.Path(tempfile.mkdtemp())
     >>> for m in ("zigzag_20_20", "turning_35"):
@@ -522,7 +522,7 @@ def read_posterior(results_dir, run_id: str):
     """An emcee run's posterior as ArviZ ``InferenceData``: every equation's chain joined into one posterior
     (``<equation>.<coefficient>``; walkers as chains, as ``arviz.from_emcee`` takes them), the log posterior in
     ``sample_stats``, the run id in the attributes. ``arviz.summary(idata)`` gives r-hat and ESS;
-    ``idata.to_netcdf(path)`` writes it (``python -m study.results posterior <run id> --out file.nc`` does both).
+    ``idata.to_netcdf(path)`` writes it (``python -m study results posterior <run id> --out file.nc`` does both).
 
     Parameters
     ----------

@@ -17,10 +17,10 @@ from __future__ import annotations
 import copy
 import math
 
-from study.measure import DEFAULT_CHANNELS, MeasurementModel
-from study.pipeline import resolve_effects
-from study.schema import Record
-from study.config import read_config
+from study.records.measure import DEFAULT_CHANNELS, MeasurementModel
+from study.run.pipeline import resolve_effects
+from study.records.schema import Record
+from study.configuration.compose import read_config
 from study.sim import load_vessel, simulate
 from study.sim.effects import ShallowWater
 

@@ -42,7 +42,7 @@ def _examples():
 
 
 def _real_data() -> bool:
-    from study.loaders import real_data_dir
+    from study.records.loaders import real_data_dir
 
     return (real_data_dir() / "kvlcc2_hsva" / "raw_data").is_dir()
 

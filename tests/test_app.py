@@ -11,8 +11,8 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from study.app import CONF_DIR
-from study.pipeline import run_study
+from study.commands.app import CONF_DIR
+from study.run.pipeline import run_study
 
 REPO = Path(__file__).resolve().parents[1]
 GROUPS = ["vessel", "depth", "environment", "noise", "maneuvers", "model", "structure", "estimator"]

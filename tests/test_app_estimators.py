@@ -12,10 +12,10 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from study.app import CONF_DIR
+from study.commands.app import CONF_DIR
 from study.identify.estimators import list_estimators, make_estimator
-from study.pipeline import run_study
-from study.executor import run_guarded
+from study.run.pipeline import run_study
+from study.run.executor import run_guarded
 from study.store import ResultStore
 
 FAST = {"emcee": ["estimator.params.target_ess=100", "estimator.params.min_tau_multiple=10",

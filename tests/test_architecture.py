@@ -78,10 +78,10 @@ def test_no_module_is_in_an_import_cycle():
 def test_the_cycle_check_finds_a_cycle():
     """The check above can fail: the same function finds a cycle added to the real graph."""
     graph = grimp.build_graph("study", cache_dir=None)
-    assert _cycle_through(graph, "study.sim.core", "study.maneuvers") is None
-    graph.add_import(importer="study.maneuvers", imported="study.sim")  # a cycle the layers forbid
-    cyc = _cycle_through(graph, "study.maneuvers", "study.sim")
-    assert cyc is not None and cyc[0] == cyc[-1] == "study.maneuvers"
+    assert _cycle_through(graph, "study.sim.core", "study.sim.maneuvers") is None
+    graph.add_import(importer="study.sim.maneuvers", imported="study.sim")  # a cycle the layers forbid
+    cyc = _cycle_through(graph, "study.sim.maneuvers", "study.sim")
+    assert cyc is not None and cyc[0] == cyc[-1] == "study.sim.maneuvers"
 
 
 #: the page that describes the layers

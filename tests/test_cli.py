@@ -1,8 +1,9 @@
 """Every command-line entry point: a problem is one line on stderr naming the setting or file, with exit status 2
 and nothing written; settings that make no sense are refused before any work; outputs are never replaced
-silently; a failed run exits non-zero and a skipped one says why (study/cli.py, study/settings.py).
+silently; a failed run exits non-zero and a skipped one says why (study/configuration/cli.py, study/run/settings.py).
 
 The subprocess tests use settings that are refused (or runs that end) within seconds of starting."""
+import importlib
 import json
 import os
 import subprocess
@@ -14,9 +15,9 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from study import cli
-from study.app import CONF_DIR
-from study.settings import check_diagnose, check_run, check_simulate
+from study.configuration import cli
+from study.commands.app import CONF_DIR
+from study.run.settings import check_diagnose, check_run, check_simulate
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -25,7 +26,7 @@ def _cmd(module, *args, cwd, env_extra=None):
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1", PYTHONPATH=str(REPO), **(env_extra or {}))
     env.pop("STUDY_VERBOSE", None)
     env.pop("HYDRA_FULL_ERROR", None)
-    return subprocess.run([sys.executable, "-m", module, *args], cwd=cwd, env=env, capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", *module.split(), *args], cwd=cwd, env=env, capture_output=True, text=True,
                           timeout=600)
 
 
@@ -111,18 +112,18 @@ def test_a_failed_run_exits_non_zero_and_a_skipped_run_says_why(tmp_path):
     assert "skipped: estimator 'LeastSquares' does regression only" in p.stdout + p.stderr
 
 
-# ------------------------------------------------------------------------------------- study.simulate
+# ---------------------------------------------------------------------------------------- python -m study simulate
 
 def test_simulate_checks_out_before_simulating(tmp_path):
-    p = _cmd("study.simulate", cwd=tmp_path)  # out= not given (was "???: unsupported file type")
-    assert p.returncode == 2 and _one_line(p).startswith("study.simulate: error: out= is required")
-    p = _cmd("study.simulate", "out=rec.txt", cwd=tmp_path)
+    p = _cmd("study simulate", cwd=tmp_path)  # out= not given (was "???: unsupported file type")
+    assert p.returncode == 2 and _one_line(p).startswith("study simulate: error: out= is required")
+    p = _cmd("study simulate", "out=rec.txt", cwd=tmp_path)
     assert p.returncode == 2 and "unsupported file type '.txt'" in _one_line(p)
     (tmp_path / "rec.csv").write_text("mine")
-    p = _cmd("study.simulate", "out=rec.csv", "sim.duration=1e9", cwd=tmp_path)  # would take hours to simulate
+    p = _cmd("study simulate", "out=rec.csv", "sim.duration=1e9", cwd=tmp_path)  # would take hours to simulate
     assert p.returncode == 2 and "refusing to overwrite" in _one_line(p)
     assert (tmp_path / "rec.csv").read_text() == "mine"
-    p = _cmd("study.simulate", "out=new.csv", "sim.duration=0", cwd=tmp_path)
+    p = _cmd("study simulate", "out=new.csv", "sim.duration=0", cwd=tmp_path)
     assert p.returncode == 2 and "sim.duration=0" in _one_line(p) and not (tmp_path / "new.csv").exists()
 
 
@@ -138,7 +139,7 @@ def test_two_writers_of_one_record_cannot_replace_each_other(tmp_path):
     writer gets FileExistsError and its data are not swapped in."""
     import pandas as pd
 
-    from study.schema import Record, read_record, write_record
+    from study.records.schema import Record, read_record, write_record
     from study.sim import load_vessel, simulate
 
     df = simulate(load_vessel("kvlcc2_l7"), "zigzag_10_10", duration=5.0)
@@ -174,13 +175,13 @@ def test_two_writers_of_one_record_cannot_replace_each_other(tmp_path):
     assert [f.name for f in tmp_path.iterdir()] == ["rec.csv"]  # no temporary file left behind
 
 
-# ------------------------------------------------------------------------------------- study.diagnose
+# ---------------------------------------------------------------------------------------- python -m study diagnose
 
 def test_diagnose_refuses_a_folder_holding_any_report_file(tmp_path):
     out = tmp_path / "rep"
     out.mkdir()
     (out / "report.html").write_text("old")  # no report.json beside it (was overwritten)
-    p = _cmd("study.diagnose", f"train={tmp_path}/none_*.csv", f"out={out}", cwd=tmp_path)
+    p = _cmd("study diagnose", f"train={tmp_path}/none_*.csv", f"out={out}", cwd=tmp_path)
     assert p.returncode == 2 and "report.html" in _one_line(p) and "refusing to overwrite" in _one_line(p)
     assert (out / "report.html").read_text() == "old"
     (out / "report.html").unlink()
@@ -210,7 +211,7 @@ def test_two_doctors_cannot_write_into_one_folder(tmp_path):
     from study.doctor.run import claimed
 
     with claimed(tmp_path / "rep", overwrite=False):
-        with pytest.raises(cli.OutputExistsError, match="another python -m study.diagnose"):
+        with pytest.raises(cli.OutputExistsError, match="another python -m study diagnose"):
             with claimed(tmp_path / "rep", overwrite=False):
                 pass
     (tmp_path / "rep" / "report.json").write_text("{}")  # a report finished meanwhile: checked under the lock
@@ -224,19 +225,19 @@ def test_two_doctors_cannot_write_into_one_folder(tmp_path):
 def test_examples_honours_help_and_never_writes_into_committed_folders(tmp_path):
     committed = REPO / "paper_figs" / "doctor" / "README.md"
     before = committed.read_bytes()
-    p = _cmd("study.doctor.examples", "--help", cwd=tmp_path)
+    p = _cmd("study doctor_examples", "--help", cwd=tmp_path)
     assert p.returncode == 0 and "--out" in p.stdout and "--overwrite" in p.stdout
     assert list(tmp_path.iterdir()) == [] and committed.read_bytes() == before
     from study.doctor import examples
 
     assert not str(examples.DEFAULT_OUT.resolve()).startswith(str(REPO / "paper_figs"))
-    p = _cmd("study.doctor.examples", "--out", str(REPO / "paper_figs" / "doctor"), cwd=tmp_path)
+    p = _cmd("study doctor_examples", "--out", str(REPO / "paper_figs" / "doctor"), cwd=tmp_path)
     assert p.returncode == 2 and "refusing to overwrite" in _one_line(p)
     assert committed.read_bytes() == before
 
 
-@pytest.mark.parametrize("module, committed", [("study.reality_check", "paper_figs"),
-                                               ("study.doctor.turn_prediction", "paper_figs/doctor")])
+@pytest.mark.parametrize("module, committed", [("study reality_check", "paper_figs"),
+                                               ("study turn_prediction", "paper_figs/doctor")])
 def test_other_writers_default_outside_the_repository_and_refuse_to_overwrite(tmp_path, module, committed):
     p = _cmd(module, "--help", cwd=tmp_path)
     assert p.returncode == 0 and "--out" in p.stdout and "--overwrite" in p.stdout and not list(tmp_path.iterdir())
@@ -244,7 +245,7 @@ def test_other_writers_default_outside_the_repository_and_refuse_to_overwrite(tm
     assert p.returncode == 2 and "refusing to overwrite" in _one_line(p)
 
 
-# ------------------------------------------------------------------------------------------ study.cli
+# ------------------------------------------------------------------------------------------ study.configuration.cli
 
 def _run_in_process(main, capsys, argv=()):
     with pytest.raises(SystemExit) as ex:
@@ -277,15 +278,26 @@ def test_user_errors_exit_2_and_unexpected_ones_exit_1_with_a_hint(capsys, monke
     assert code == 0
 
 
-def test_every_entry_point_runs_through_the_cli_wrapper():
-    """Each module with a ``__main__`` block hands it to study.cli (run or run_hydra)."""
-    mains = [p for p in (REPO / "study").rglob("*.py") if "__name__ == \"__main__\"" in p.read_text()]
-    mains += [REPO / "study" / "__main__.py", REPO / "study" / "figures" / "__main__.py"]
-    assert len(mains) >= 8
-    for p in mains:
-        text = p.read_text()
-        tail = text[text.find("__name__ == \"__main__\""):] if "__name__ ==" in text else text
-        assert "run(" in tail or "run_hydra(" in tail, p
+def test_every_command_runs_through_the_cli_wrapper():
+    """The commands are in one place: only ``study/__main__.py`` has a ``__main__`` block, and each command of
+    ``study.commands`` hands its ``command()`` to study.configuration.cli (run or run_hydra)."""
+    import inspect
+
+    from study.commands import DEFAULT, names
+
+    mains = [p.relative_to(REPO).as_posix() for p in (REPO / "study").rglob("*.py")
+             if "__name__ == \"__main__\"" in p.read_text(encoding="utf-8")]
+    assert mains == ["study/__main__.py"]
+    assert {"diagnose", "simulate", "results", "figures", "reality_check"} <= set(names())
+    for name in [DEFAULT, *names()]:
+        src = inspect.getsource(importlib.import_module(f"study.commands.{name}").command)
+        assert "run(" in src or "run_hydra(" in src, name
+
+
+def test_a_word_that_is_no_command_is_refused_in_one_line(tmp_path):
+    p = _cmd("study", "diagnoes", cwd=tmp_path)
+    assert p.returncode == 2 and _one_line(p).startswith("study: error: 'diagnoes' is neither a command (")
+    assert not list(tmp_path.iterdir())
 
 
 def test_hydra_errors_become_one_line_messages():
@@ -312,7 +324,7 @@ def test_sweep_progress_shows_the_total(tmp_path):
     ("study", ["estimatr=ridge"], "estimatr: no such setting; did you mean 'estimator'?"),
     ("study", ["sim.dtt=0.1"], "sim.dtt: no such setting; did you mean 'sim.dt'?"),
     ("study", ["estimator=ridg"], "estimator=ridg: no such option; did you mean ridge?"),
-    ("study.simulate", ["out=x.csv", "manuver=zigzag_10_10"], "manuver: no such setting; did you mean 'maneuver'?"),
+    ("study simulate", ["out=x.csv", "manuver=zigzag_10_10"], "manuver: no such setting; did you mean 'maneuver'?"),
 ])
 def test_a_misspelt_setting_gets_did_you_mean_not_the_plus_key_advice(tmp_path, module, args, expect):
     p = _cmd(module, *args, cwd=tmp_path)

@@ -154,7 +154,7 @@ def test_coverage_resamples_datasets_whole():
 
 
 def test_a_configuration_that_draws_nothing_is_one_dataset():
-    from study.app import distinct_datasets
+    from study.commands.app import distinct_datasets
 
     none = {"noise": {"kind": "relative", "level": 0.0}, "maneuvers": {"train": ["zigzag_10_10"]}}
     assert distinct_datasets(none, 20) == 1

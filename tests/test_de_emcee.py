@@ -14,8 +14,8 @@ from study.identify.fit import identify
 from study.identify.models import make_model
 from study.identify.output_error import DIVERGED, OutputErrorProblem, default_bounds, local_fit
 from study.identify.structures import make_structure
-from study.measure import MeasurementModel
-from study.config import read_config
+from study.records.measure import MeasurementModel
+from study.configuration.compose import read_config
 from study.sim import load_vessel, simulate
 
 

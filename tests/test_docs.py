@@ -2,7 +2,7 @@
 with the two quickstart commands CI runs; the configuration page's group table lists every option of every group
 in conf/; the studies page's claims table is ``paper_figs/CLAIMS.md``'s; the site builds with ``mkdocs build
 --strict``; every file under ``paper_figs/`` that the README or a documentation page links, shows or names exists
-(also where mkdocs is not installed); and without the real data ``python -m study.reality_check`` stops with one line saying where it looked
+(also where mkdocs is not installed); and without the real data ``python -m study reality_check`` stops with one line saying where it looked
 and how to point at the data (not a KeyError). The layer table (docs/concepts/architecture.md) is checked
 against ``.importlinter`` by tests/test_architecture.py."""
 import re
@@ -79,7 +79,7 @@ def test_every_paper_figs_file_the_readme_and_docs_link_exists():
             if not rel.startswith("paper_figs/") or not (ROOT / rel).is_file():
                 missing.append(f"{page.relative_to(ROOT)}: {written}")
     assert found >= 10, found  # the pages show paper_figs/ figures: a pattern that finds none is broken
-    assert not missing, f"links to files that do not exist (rebuild with python -m study.figures?): {missing}"
+    assert not missing, f"links to files that do not exist (rebuild with python -m study figures?): {missing}"
 
 
 def test_the_paper_figs_link_check_can_fail():
@@ -191,7 +191,7 @@ def _env() -> dict:
 def test_reality_check_without_data_says_where_in_one_line(tmp_path):
     env = {"PATH": "/usr/bin:/bin", "PYTHONPATH": str(ROOT), "STUDY_REAL_DATA": str(tmp_path / "nowhere"),
            "OPENBLAS_NUM_THREADS": "1"}
-    p = subprocess.run([sys.executable, "-m", "study.reality_check", "--out", str(tmp_path / "out")], cwd=tmp_path,
+    p = subprocess.run([sys.executable, "-m", "study", "reality_check", "--out", str(tmp_path / "out")], cwd=tmp_path,
                        capture_output=True, text=True, timeout=300, env=env)
     assert p.returncode == 2
     lines = p.stderr.strip().splitlines()

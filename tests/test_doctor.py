@@ -21,9 +21,9 @@ import pytest
 
 from study.doctor.diagnose import Doctor, Evaluation, Options
 from study.identify.effects import effect_config
-from study.measure import MeasurementModel
-from study.pipeline import resolve_effects
-from study.config import read_config
+from study.records.measure import MeasurementModel
+from study.run.pipeline import resolve_effects
+from study.configuration.compose import read_config
 from study.sim import load_vessel, simulate
 
 VESSEL = read_config("vessel", "kvlcc2_l7")
@@ -199,7 +199,7 @@ def test_an_effect_that_removes_less_than_half_of_the_error_is_said_to_explain_i
 def test_bad_input_is_a_clear_error(tmp_path):
     bad = tmp_path / "bad.csv"
     bad.write_text("time,u,v\n0,1,0\n0.1,1,0\n")
-    p = subprocess.run([sys.executable, "-m", "study.diagnose", f"train={bad}", f"out={tmp_path / 'o'}",
+    p = subprocess.run([sys.executable, "-m", "study", "diagnose", f"train={bad}", f"out={tmp_path / 'o'}",
                         "log_runs=false"], capture_output=True, text=True, timeout=300)
     assert p.returncode != 0 and "missing required column" in p.stderr and "bad.csv" in p.stderr
     with pytest.raises(ValueError, match="at least two records"):
@@ -212,8 +212,8 @@ def test_bad_input_is_a_clear_error(tmp_path):
 
 def test_the_doctor_reads_a_comma_separated_list_of_patterns(tmp_path):
     """train=<glob>,<glob> as ``python -m study`` takes it; a pattern that matches nothing is named."""
-    from study.loaders import load_records
-    from study.schema import Record, write_record
+    from study.records.loaders import load_records
+    from study.records.schema import Record, write_record
 
     df = simulate(load_vessel(VESSEL), "zigzag_10_10", duration=30.0)
     for sub in ("a", "b"):
@@ -227,19 +227,19 @@ def test_the_doctor_reads_a_comma_separated_list_of_patterns(tmp_path):
 
 @pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_cli_on_simulated_files_names_the_hidden_current(tmp_path):
-    """The README's example: records made by python -m study.simulate with a hidden current; the doctor names
+    """The README's example: records made by python -m study simulate with a hidden current; the doctor names
     it, writes report.html/json and its figures, logs its ladder in the results table, and keeps an existing
     report."""
     for m, stem in (("zigzag_10_10", "train_a"), ("zigzag_20_20", "train_b"), ("random_rudder", "train_c"),
                     ("zigzag_20_10", "val_a"), ("turning_35", "val_b")):
-        p = subprocess.run([sys.executable, "-m", "study.simulate", "vessel=kvlcc2_l7", f"maneuver={m}",
+        p = subprocess.run([sys.executable, "-m", "study", "simulate", "vessel=kvlcc2_l7", f"maneuver={m}",
                             "environment=current", "noise=low_relative", "noise.sample_dt=0.1", "sim.duration=300",
                             f"seed={len(stem)}", f"out={tmp_path / stem}.csv"], capture_output=True, text=True,
                            timeout=300)
         assert p.returncode == 0, p.stderr[-2000:]
     out = tmp_path / "report"
     env = dict(os.environ, STUDY_RESULTS_DIR=str(tmp_path / "results"))
-    args = [sys.executable, "-m", "study.diagnose", f"train={tmp_path}/train_*.csv", f"validate={tmp_path}/val_*.csv",
+    args = [sys.executable, "-m", "study", "diagnose", f"train={tmp_path}/train_*.csv", f"validate={tmp_path}/val_*.csv",
             "vessel=kvlcc2_l7", f"out={out}"]
     p = subprocess.run(args, capture_output=True, text=True, timeout=600, env=env)
     assert p.returncode == 0, p.stderr[-3000:]
@@ -325,7 +325,7 @@ def test_a_ladder_step_that_raises_the_error_is_rejected(monkeypatch):
 
 
 def test_a_flipped_rudder_is_refused_before_fitting():
-    from study.vessel_checks import RecordCheckError
+    from study.records.vessel_checks import RecordCheckError
 
     train, val = records([], duration=120.0)
     train[0]["delta"] = -train[0]["delta"]

@@ -1,4 +1,4 @@
-"""Plausibility checks of records against the vessel (study.vessel_checks), run before the doctor fits anything.
+"""Plausibility checks of records against the vessel (study.records.vessel_checks), run before the doctor fits anything.
 
 Records: the 7 m KVLCC2 model (kvlcc2_l7) simulated through a 10/10 zigzag (200 s) and measured at 10 Hz with
 1 % white noise, as in tests/test_doctor.py. A clean record passes; a flipped rudder, a full-scale record given
@@ -11,11 +11,11 @@ import re
 import numpy as np
 import pytest
 
-from study import vessel_checks as checks
-from study.vessel_checks import RecordCheckError, check_records
-from study.measure import MeasurementModel
-from study.schema import Record
-from study.config import read_config
+from study.records import vessel_checks as checks
+from study.records.vessel_checks import RecordCheckError, check_records
+from study.records.measure import MeasurementModel
+from study.records.schema import Record
+from study.configuration.compose import read_config
 from study.sim import load_vessel, simulate
 
 VESSEL = read_config("vessel", "kvlcc2_l7")

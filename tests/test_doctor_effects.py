@@ -165,7 +165,7 @@ def test_every_force_model_kind_is_diagnosed(vessel, model):
     """The doctor with the other force models, identified and anchored to the vessel config: a hidden current
     (12 % of the speed towards 200 deg) on the Abkowitz Mariner and the waterjet USV is found; the AUV's hull
     identified from zigzags diverges in the 35 deg turn, and the report says so rather than naming anything."""
-    from study.config import read_config
+    from study.configuration.compose import read_config
 
     v = read_config("vessel", vessel)
     example = {"environment": [{"name": "current", "speed_U0": 0.12, "direction_deg": 200.0}]}

@@ -69,7 +69,7 @@ def _report() -> dict:
         "title": "Model doctor: KVLCC2 MMG hull against free-running records",
         "verdict": ("The model misses a steady current (0.4 m/s from 030 deg); adding it cuts the validation "
                     "error by 62 %."),
-        "created_by": "study.diagnose 0.1.0",
+        "created_by": "python -m study diagnose",
         "vessel": "kvlcc2",
         "model": "mmg_hull",
         "structure": "output_error",

@@ -1,4 +1,4 @@
-"""The doctor's manoeuvre metrics (study.maneuver_metrics): turning-circle and zigzag characteristics of a
+"""The doctor's manoeuvre metrics (study.records.maneuver_metrics): turning-circle and zigzag characteristics of a
 measured record against two model replays.
 
 Records: the 7 m KVLCC2 model (kvlcc2_l7), a 35 deg turning circle and a 20/10 zigzag, 1 % white noise, 10 Hz
@@ -13,10 +13,10 @@ import pandas as pd
 import pytest
 
 from study.doctor.html import metrics_table_html
-from study.maneuver_metrics import maneuver_metrics
-from study.measure import MeasurementModel
-from study.metrics import turning_metrics, zigzag_metrics
-from study.config import read_config
+from study.records.maneuver_metrics import maneuver_metrics
+from study.records.measure import MeasurementModel
+from study.records.metrics import turning_metrics, zigzag_metrics
+from study.configuration.compose import read_config
 from study.sim import load_vessel, replay, simulate
 
 VESSEL = read_config("vessel", "kvlcc2_l7")
@@ -162,7 +162,7 @@ def test_random_rudder_and_odd_records_never_raise():
 
 def test_manual_steering_before_the_turn_is_cut_off():
     """A real record starts with the helmsman's course keeping (the Esso Osaka pond runs): the execution of
-    study.metrics (the first rudder movement) would fall there; the metrics are taken from the turn's own start,
+    study.records.metrics (the first rudder movement) would fall there; the metrics are taken from the turn's own start,
     and the replays are cut at the same instant."""
     v = load_vessel(VESSEL)
     t = np.arange(0.0, 160.0, 0.1)
@@ -207,7 +207,7 @@ def test_the_doctor_replays_a_record_with_an_approach_from_the_manoeuvre_start()
     from types import SimpleNamespace
 
     from study.doctor.report import manoeuvre_predictions
-    from study.maneuver_metrics import manoeuvre_start
+    from study.records.maneuver_metrics import manoeuvre_start
 
     v = load_vessel(VESSEL)
     t = np.arange(0.0, 160.0, 0.1)

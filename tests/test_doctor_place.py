@@ -1,4 +1,4 @@
-"""Candidates that fit the place, and set-up effects that stay with their set-up (``study.facility``).
+"""Candidates that fit the place, and set-up effects that stay with their set-up (``study.records.facility``).
 
 - a record's ``facility`` is read from a CSV header and from Parquet metadata, and the real datasets' loaders set
   it; an unknown one is refused in one line naming the file, the key, the value and what was expected;
@@ -18,10 +18,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from study import facility as fac
+from study.records import facility as fac
 from study.doctor.diagnose import Doctor, Options
 from study.doctor.model_error import without_effects
-from study.schema import Record, SchemaError, read_record, write_record
+from study.records.schema import Record, SchemaError, read_record, write_record
 
 from test_doctor import KNOWN, U0, VESSEL, records
 
@@ -65,16 +65,16 @@ def test_an_unknown_facility_is_refused_naming_file_key_value_and_choices(tmp_pa
 def test_the_command_refuses_an_unknown_facility_in_one_line(tmp_path, biased):
     csv = tmp_path / "lake.csv"
     csv.write_text("# facility: lake\n" + biased[0][0].to_csv(index=False))
-    p = subprocess.run([sys.executable, "-m", "study.diagnose", f"train={csv}", f"out={tmp_path / 'o'}",
+    p = subprocess.run([sys.executable, "-m", "study", "diagnose", f"train={csv}", f"out={tmp_path / 'o'}",
                         "log_runs=false"], capture_output=True, text=True, timeout=300)
     assert p.returncode == 2
-    assert p.stderr.strip() == (f"study.diagnose: error: {csv}: facility: lake: expected one of towing_tank, basin, "
+    assert p.stderr.strip() == (f"study diagnose: error: {csv}: facility: lake: expected one of towing_tank, basin, "
                                 "pond, sea")
     assert not (tmp_path / "o" / "report.json").exists()
 
 
 def test_the_real_datasets_loaders_set_their_facility():
-    from study.loaders import list_real_records, load_real
+    from study.records.loaders import list_real_records, load_real
 
     hsva = list_real_records("kvlcc2_hsva")
     esso = list_real_records("esso_osaka", kind="zigzag")

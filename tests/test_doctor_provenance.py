@@ -11,7 +11,7 @@ import pytest
 from study.doctor.diagnose import Doctor, Options
 from study.doctor.report import write_report
 from study.doctor.html import render_html
-from study.schema import Record, read_record, write_record
+from study.records.schema import Record, read_record, write_record
 
 from test_doctor import KNOWN, VESSEL, records
 
@@ -81,7 +81,7 @@ def test_the_provenance_is_escaped_and_an_odd_one_refused():
     from test_doctor_html import _minimal
 
     prov = {"package": "study", "version": None, "revision": None, "modified": None, "date": "2024-01-01T00:00:00",
-            "command": "python -m study.diagnose train=<a>", "records": []}
+            "command": "python -m study diagnose train=<a>", "records": []}
     page = render_html(_minimal(provenance=prov))
     assert "train=&lt;a&gt;" in page and 'href="#provenance"' in page
     with pytest.raises(ReportError, match=r"'provenance'\['records'\]\[0\] is an int, not an object"):
@@ -104,7 +104,7 @@ def test_each_candidate_has_its_manoeuvre_metrics_beside_its_nrmse(written):
 def test_a_candidate_that_lowers_the_nrmse_but_worsens_the_metrics_says_so(written, monkeypatch):
     import copy
 
-    import study.maneuver_metrics as mmod
+    import study.records.maneuver_metrics as mmod
     from study.doctor.report import candidate_metrics, manoeuvre_predictions, predictions
 
     _, _, rep, d = written

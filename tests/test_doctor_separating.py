@@ -105,7 +105,7 @@ def test_records_with_and_without_a_depth_are_warned_of():
     one h/T, which the report says, naming them."""
     from doctor_cases import make_records
 
-    from study.schema import Record
+    from study.records.schema import Record
 
     train, val, _ = make_records({"depth_h_T": {"train": [None, 2.0, None], "validate": [1.5, 1.5]}}, duration=60.0)
     val = [Record(data=r.data.drop(columns=["depth"]), meta=r.meta) for r in val]

@@ -83,7 +83,7 @@ def test_the_report_predicts_both_turns_and_says_they_extrapolate(report):
 @pytest.mark.slow
 def test_kvlcc2_from_hsvas_zigzags_the_report_says_the_turn_extrapolates_and_names_its_carriers(tmp_path):
     from study.doctor.run import diagnose_conf, run
-    from study.loaders import real_data_dir
+    from study.records.loaders import real_data_dir
 
     d = real_data_dir() / "kvlcc2_hsva" / "raw_data"
     if not list(d.glob("HSVA_CPMC_KVLCC2_Z_*_0?.dat")):

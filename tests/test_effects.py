@@ -15,10 +15,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from study.config import read_config
+from study.configuration.compose import read_config
 from study.identify.effects import Effect, effect_config, list_effects, make_effect
 from study.identify.with_effects import EffectsProblem, Fit
-from study.schema import Record
+from study.records.schema import Record
 from study.sim import simulate
 
 VESSEL = read_config("vessel", "kvlcc2_l7")

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from study import calibration as cal
+from study.run import calibration as cal
 from study.identify.estimators import make_estimator
 from study.identify.estimators.bayes import IidRegressionProposal, LaplaceProposal, SnookerMove
 from study.identify.rows import prepare

@@ -13,7 +13,7 @@ import pytest
 
 from study.identify.estimators import Estimator, estimator_class, list_estimators, make_estimator
 from study.identify.estimators.problem import RegressionProblem
-from study.config import read_config
+from study.configuration.compose import read_config
 
 ROW_NOISE_ARGS = ("noise_operators", "row_errors")
 
@@ -131,7 +131,7 @@ def test_a_model_with_effects_is_identified_by_variable_projection():
 
 
 def test_a_run_without_effects_does_not_use_identification_with_effects():
-    from study.fingerprint import closure, entries
+    from study.store.fingerprint import closure, entries
 
     def modules(model):  # every component of a simulated run
         conf = {"model": model, "estimator": read_config("estimator", "ls")}

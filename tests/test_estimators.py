@@ -36,7 +36,7 @@ from study.identify.estimators.lssvm import LSSVM, OnlineLSSVM, TruncatedLSSVM, 
 from study.identify.estimators.sparse import SINDy
 from study.identify.estimators.svr import EpsilonSVR, NuSVR
 from study.identify.synthetic import manoeuvre_regressors
-from study.config import read_config
+from study.configuration.compose import read_config
 
 MINE = ["ls", "ridge", "lasso", "lssvm", "tlssvm", "lssvm_online", "svr_eps", "svr_nu", "sindy"]
 

@@ -1,6 +1,6 @@
 """CI runs the ``smoke`` study and rebuilds the figures from its table: every estimator on a regression
 structure and on output error lands in the table (regression estimators skipped on output error, with the
-reason); ``python -m study.figures`` rebuilds the outputs twice, byte for byte the same, with CLAIMS.md and a
+reason); ``python -m study figures`` rebuilds the outputs twice, byte for byte the same, with CLAIMS.md and a
 README listing each output. A rebuild from a table holding one study leaves every other study's outputs and rows
 as they were. (A killed sweep resuming without recomputing: tests/test_app.py.)"""
 import filecmp
@@ -52,7 +52,7 @@ def figs(smoke, tmp_path_factory):
     """paper_figs/ built once from the smoke study's table (with its study table)."""
     root, results, _ = smoke
     out = tmp_path_factory.mktemp("figs") / "figs0"
-    p = subprocess.run([sys.executable, "-m", "study.figures", "--results", str(results), "--out", str(out)],
+    p = subprocess.run([sys.executable, "-m", "study", "figures", "--results", str(results), "--out", str(out)],
                        cwd=root, capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stderr[-3000:]
     assert "not fit for print" not in p.stderr, p.stderr[-3000:]  # study/figures/style.py's rules
@@ -64,7 +64,7 @@ def test_figures_rebuild_byte_stable(smoke, figs, tmp_path):
     root, results, _ = smoke
     outs = [figs]
     out = tmp_path / "figs1"
-    p = subprocess.run([sys.executable, "-m", "study.figures", "--results", str(results), "--out", str(out)],
+    p = subprocess.run([sys.executable, "-m", "study", "figures", "--results", str(results), "--out", str(out)],
                        cwd=root, capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stderr[-3000:]
     outs.append(out)
@@ -88,7 +88,7 @@ def test_figures_rebuild_byte_stable(smoke, figs, tmp_path):
 
 
 def test_figures_without_a_table_is_a_clear_error(tmp_path):
-    p = subprocess.run([sys.executable, "-m", "study.figures", "--results", str(tmp_path / "nothing"), "--out",
+    p = subprocess.run([sys.executable, "-m", "study", "figures", "--results", str(tmp_path / "nothing"), "--out",
                         str(tmp_path / "figs")], capture_output=True, text=True, timeout=120)
     assert p.returncode == 2 and "no results table" in p.stderr
 
@@ -108,7 +108,7 @@ def test_rebuilding_one_study_leaves_every_other_study_untouched(smoke, tmp_path
     before = _snapshot(out)
     others = {k: v for k, v in before.items() if "/" in k and not k.startswith("smoke/")}
     assert len({k.split("/")[0] for k in others}) >= 6  # the seed studies, emcee_kt, grand, the doctor
-    p = subprocess.run([sys.executable, "-m", "study.figures", "--results", str(results), "--out", str(out)],
+    p = subprocess.run([sys.executable, "-m", "study", "figures", "--results", str(results), "--out", str(out)],
                        capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stderr[-3000:]
     after = _snapshot(out)
@@ -141,7 +141,7 @@ def test_a_study_module_without_name_and_build_is_refused(tmp_path, monkeypatch)
 
 
 def test_every_study_module_has_its_experiment_and_every_experiment_with_a_study_its_module():
-    from study.config import simulated_studies
+    from study.configuration.compose import simulated_studies
     from study.figures.studies import discover
 
     found = discover()
@@ -150,7 +150,7 @@ def test_every_study_module_has_its_experiment_and_every_experiment_with_a_study
     named = {m.group(1) for f in conf.glob("*.yaml")
              if (m := re.search(r"^study: (\w+)", f.read_text(), re.M))}
     assert set(found) == named, (sorted(found), sorted(named))
-    assert simulated_studies() == named  # the names a run on files may not join (study.records_run)
+    assert simulated_studies() == named  # the names a run on files may not join (study.run.records_run)
 
 
 def _discovered_studies() -> list:
@@ -167,7 +167,7 @@ def test_every_study_follows_the_contract(name):
     sweep under its name. (Its figures rebuilt from a table: the tests above, on smoke and the committed tables.)"""
     import inspect
 
-    from study.config import read_config
+    from study.configuration.compose import read_config
     from study.figures.studies import discover
 
     mod = discover()[name]
@@ -182,11 +182,11 @@ def test_every_study_follows_the_contract(name):
 
 
 def _from_committed_tables(out: Path, tmp_path: Path) -> str:
-    """`python -m study.figures --out OUT` as on a fresh clone: no results folder, no STUDY_RESULTS_DIR."""
+    """`python -m study figures --out OUT` as on a fresh clone: no results folder, no STUDY_RESULTS_DIR."""
     empty = tmp_path / "cwd"
     empty.mkdir()
     env = {k: v for k, v in os.environ.items() if k != "STUDY_RESULTS_DIR"}
-    p = subprocess.run([sys.executable, "-m", "study.figures", "--out", str(out)], cwd=empty, env=env,
+    p = subprocess.run([sys.executable, "-m", "study", "figures", "--out", str(out)], cwd=empty, env=env,
                        capture_output=True, text=True, timeout=900)
     assert p.returncode == 0, p.stderr[-3000:]
     assert "not fit for print" not in p.stderr, p.stderr[-3000:]  # study/figures/style.py's rules
@@ -196,7 +196,7 @@ def _from_committed_tables(out: Path, tmp_path: Path) -> str:
 @pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_a_study_rebuilds_byte_identically_from_its_own_committed_table(smoke, figs, tmp_path):
     """Each rebuilt study keeps its table (finished runs, parameters, the artefacts its figures read) in
-    <out>/<study>/table/; with no results folder, `python -m study.figures` rebuilds from those tables alone, to
+    <out>/<study>/table/; with no results folder, `python -m study figures` rebuilds from those tables alone, to
     the same bytes (a fresh clone can rebuild paper_figs/ without re-running any study)."""
     _, results, _ = smoke
     a = figs
@@ -214,7 +214,7 @@ def test_a_study_rebuilds_byte_identically_from_its_own_committed_table(smoke, f
 
 @pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
 def test_the_committed_paper_figs_rebuild_from_their_tables_to_the_same_bytes(tmp_path):
-    """What a fresh clone does: `python -m study.figures` with no results folder rebuilds every study whose table
+    """What a fresh clone does: `python -m study figures` with no results folder rebuilds every study whose table
     is committed, and every file of paper_figs/ comes out as committed (git status stays clean)."""
     out = tmp_path / "paper_figs"
     shutil.copytree(REPO / "paper_figs", out)
@@ -230,6 +230,6 @@ def test_the_committed_paper_figs_rebuild_from_their_tables_to_the_same_bytes(tm
 
 def test_an_unknown_study_is_refused_before_anything_is_written(tmp_path):
     out = tmp_path / "figs"
-    r = subprocess.run([sys.executable, "-m", "study.figures", "--study", "nope", "--out", str(out)],
+    r = subprocess.run([sys.executable, "-m", "study", "figures", "--study", "nope", "--out", str(out)],
                        capture_output=True, text=True, cwd=REPO)
     assert r.returncode == 2 and "--study nope: no such study" in r.stderr and not out.exists()

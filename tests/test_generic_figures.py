@@ -1,8 +1,8 @@
 """Figures for a sweep of one's own: runs that no named study claims get a generic comparison of what the sweep
 varied, and the command says what it built."""
-from study.config import compose
-from study.executor import run_replicated
-from study.pipeline import SimulatedJob
+from study.configuration.compose import compose
+from study.run.executor import run_replicated
+from study.run.pipeline import SimulatedJob
 from study.store import ResultStore
 
 

@@ -21,7 +21,7 @@ from study.identify.rows import prepare
 from study.identify.models import make_model
 from study.identify.rows import build
 from study.identify.structures import list_structures, make_structure
-from study.config import list_configs, read_config
+from study.configuration.compose import list_configs, read_config
 from study.sim import load_vessel, simulate
 
 TRAIN = ("zigzag_10_10", "zigzag_20_20", "random_rudder")
@@ -242,7 +242,7 @@ def test_build_is_a_clear_error_for_bad_names():
 
 
 def test_model_on_the_wrong_kind_is_skipped_with_the_reason():
-    from study.run_common import skip_reason
+    from study.run.common import skip_reason
 
     v = load_vessel("kvlcc2")
     model = make_model("abkowitz", v)
@@ -251,7 +251,7 @@ def test_model_on_the_wrong_kind_is_skipped_with_the_reason():
 
 
 def test_regression_estimators_skip_output_error_with_the_reason():
-    from study.run_common import skip_reason
+    from study.run.common import skip_reason
 
     v = load_vessel("kvlcc2")
     why = skip_reason(make_model("mmg_hull", v), make_structure("output_error"), make_estimator("ls"))

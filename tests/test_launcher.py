@@ -23,7 +23,7 @@ from pathlib import Path
 import pytest
 from omegaconf import OmegaConf
 
-import study.app  # noqa: F401  (registers the project's sweeper and launchers, as the app does)
+import study.commands.app
 from hydra_plugins.study_launcher.compose import JobComposer, config_differences
 from hydra_plugins.study_launcher.launchers import task_groups
 from hydra_plugins.study_launcher.runner import make_chunks

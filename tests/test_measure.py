@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from study.measure import DEFAULT_CHANNELS, MeasurementModel, resample
+from study.records.measure import DEFAULT_CHANNELS, MeasurementModel, resample
 
 N = 20001
 

@@ -5,8 +5,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from study.metrics import (detect_maneuver, prediction_metrics, standard_metrics, turning_metrics,
-                           zigzag_metrics)
+from study.records.metrics import (detect_maneuver, prediction_metrics, standard_metrics, turning_metrics, zigzag_metrics)
 
 D2R = math.pi / 180
 

@@ -9,9 +9,9 @@ import yaml
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from study.app import CONF_DIR
-from study.measure import SENSORS, MeasurementModel, sensor_sd
-from study.pipeline import measurement, noise_sd
+from study.commands.app import CONF_DIR
+from study.records.measure import SENSORS, MeasurementModel, sensor_sd
+from study.run.pipeline import measurement, noise_sd
 from study.sim import load_vessel, simulate
 
 NOISE_DIR = Path(CONF_DIR) / "noise"

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from study import metrics
+from study.records import metrics
 from simd_asm import packed_double_ops
-from study.maneuvers import get_maneuver
-from study.config import read_config
+from study.sim.maneuvers import get_maneuver
+from study.configuration.compose import read_config
 from study.sim import initial_state, load_vessel, replay, run, simulate
 from study.sim.core import ENV_NAMES
 from study.sim.effects import ShallowWater

@@ -29,7 +29,7 @@ def test_notebook_runs(path, monkeypatch):
     nbclient = pytest.importorskip("nbclient", reason="nbclient is not installed (pip install -e '.[test]')")
     pytest.importorskip("ipykernel", reason="ipykernel is not installed (pip install -e '.[test]')")
     if path.name in NEEDS_REAL_DATA:
-        from study.loaders import real_data_dir
+        from study.records.loaders import real_data_dir
 
         if not (real_data_dir() / "kvlcc2_hsva" / "raw_data").is_dir():
             pytest.skip("HSVA's records are not here: no shared/data/real beside the checkout (STUDY_REAL_DATA)")

@@ -1,9 +1,9 @@
-"""Plausibility checks of the schema reader (study.plausibility through study.schema.validate / read_record).
+"""Plausibility checks of the schema reader (study.records.plausibility through study.records.schema.validate / read_record).
 
 Each broken record is made from a good one, written to a file and read back: a heading in degrees (unwrapped, so
 the old jump check misses it), a yaw rate in deg/s below 2 (a full-scale ship: the old limit misses it), both in
 degrees, time in milliseconds, speeds in knots, u, v off the track by a calibration factor, two records joined end
-to end, a position glitch, a channel not logged; n in rpm is a check against the vessel (study.vessel_checks), run
+to end, a position glitch, a channel not logged; n in rpm is a check against the vessel (study.records.vessel_checks), run
 on the record read from its file. Each error names the file, the column, the rows and the fix. Good records raise
 nothing and warn nothing: simulated records of every vessel kind at every noise definition (the real records of
 ../shared/data/real: tests/test_schema.py).
@@ -17,9 +17,9 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from study.app import CONF_DIR
-from study.schema import PLAUSIBILITY, RecordWarning, SchemaError, read_record, validate
-from study.simulate import make_record
+from study.commands.app import CONF_DIR
+from study.records.schema import PLAUSIBILITY, RecordWarning, SchemaError, read_record, validate
+from study.commands.simulate import make_record
 
 
 def _simulated(vessel: str, maneuver: str, noise: str, seed: int = 0, **sim) -> pd.DataFrame:
@@ -142,10 +142,10 @@ def test_plausibility_option(tmp_path, good):
 
 
 def test_n_in_rpm_is_checked_against_the_vessel(tmp_path):
-    """The schema cannot know the vessel's propeller speed: the doctor's check does it (study.vessel_checks), on
-    the record as read from its file (what `python -m study train=...` and `python -m study.diagnose` do)."""
-    from study.vessel_checks import RecordCheckError, check_records
-    from study.config import read_config
+    """The schema cannot know the vessel's propeller speed: the doctor's check does it (study.records.vessel_checks), on
+    the record as read from its file (what `python -m study train=...` and `python -m study diagnose` do)."""
+    from study.records.vessel_checks import RecordCheckError, check_records
+    from study.configuration.compose import read_config
 
     df = _simulated("kvlcc2_l7", "zigzag_10_10", "low", **{"duration": 200})
     p = _write(tmp_path, df.assign(n=df["n"] * 60.0))
@@ -194,7 +194,7 @@ def test_garbage_parquet_names_the_file(tmp_path, good):
     ("a\nb\nc\nd\n" + "1 2 3\n" * 30, r"expected 12 whitespace-separated columns"),
 ])
 def test_bad_dat_names_the_file(tmp_path, body, message):
-    from study.loaders import load_real
+    from study.records.loaders import load_real
 
     p = tmp_path / "HSVA_CPMC_KVLCC2_bad.dat"
     p.write_text(body, encoding="cp1252")

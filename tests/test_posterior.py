@@ -48,10 +48,10 @@ def test_the_command_prints_the_diagnostics_and_writes_the_file(tmp_path):
     table = REPO / "paper_figs" / "emcee_kt" / "table"
     run = sorted(p.name for p in (table / "artefacts").iterdir() if (p / "chain.npz").exists())[0]
     out = tmp_path / "post.nc"
-    p = subprocess.run([sys.executable, "-m", "study.results", "posterior", run, "--root", str(table), "--out",
+    p = subprocess.run([sys.executable, "-m", "study", "results", "posterior", run, "--root", str(table), "--out",
                         str(out)], capture_output=True, text=True, cwd=tmp_path, timeout=300)
     assert p.returncode == 0, p.stderr
     assert "r_hat" in p.stdout and "ess_bulk" in p.stdout and out.is_file()
-    bad = subprocess.run([sys.executable, "-m", "study.results", "posterior", "0000000000000000", "--root",
+    bad = subprocess.run([sys.executable, "-m", "study", "results", "posterior", "0000000000000000", "--root",
                           str(table)], capture_output=True, text=True, cwd=tmp_path, timeout=300)
-    assert bad.returncode == 2 and bad.stderr.startswith("study.results: error: 0000000000000000: no chain.npz")
+    assert bad.returncode == 2 and bad.stderr.startswith("study results: error: 0000000000000000: no chain.npz")

@@ -8,10 +8,10 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from study.app import CONF_DIR
+from study.commands.app import CONF_DIR
 from study.identify.priors import empirical_mmg_hull, empirical_resistance, vessel_m_nd
-from study.pipeline import run_study
-from study.config import read_config
+from study.run.pipeline import run_study
+from study.configuration.compose import read_config
 from study.sim import load_vessel
 
 CFG_KEYS = {"m_x": "m_x", "m_y": "m_y", "J_z": "J_z", "Xvv": "X_vv", "Xvr": "X_vr", "Xrr": "X_rr",

@@ -2,14 +2,14 @@
 against reality'). Skipped when ../shared/data/real is not there."""
 import pytest
 
-from study.loaders import list_real_records
+from study.records.loaders import list_real_records
 
 pytestmark = pytest.mark.skipif(not list_real_records("kvlcc2_hsva"), reason="../shared/data/real not available")
 
 
 @pytest.fixture(scope="module")
 def table():
-    from study.reality_check import build_table
+    from study.commands.reality_check import build_table
 
     return build_table()[0]
 

@@ -1,5 +1,5 @@
 """emcee's regression likelihood models the noise each sample structure makes (``study.identify.row_noise``), so that
-its 90 % intervals cover the truth about 90 % of the time (``study.calibration``).
+its 90 % intervals cover the truth about 90 % of the time (``study.run.calibration``).
 
 The coverage statistics use the posterior in closed form (it is Gaussian: the same function ``EmceeSampler.fit``
 samples), and one test checks that the sampler reproduces those intervals through ``identify``. The case is the
@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from study import calibration as cal
+from study.run import calibration as cal
 from study.identify.fit import identify
 from study.identify.rows import prepare
 from study.identify.estimators.prior import gls_posterior
 from study.identify.row_noise import RowNoise, RowOperators
 from study.identify.structures import make_structure
-from study.config import read_config
+from study.configuration.compose import read_config
 
 STRUCTURES = ("euler", "central", "integral", "smoothed", "diff_center")
 

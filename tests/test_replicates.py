@@ -19,9 +19,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from study.config import compose
-from study.executor import Replicate, dataset_seed, run_replicated
-from study.pipeline import SimulatedJob
+from study.configuration.compose import compose
+from study.run.executor import Replicate, dataset_seed, run_replicated
+from study.run.pipeline import SimulatedJob
 from study.store import ResultStore, run_id
 
 TINY = ["experiment=tiny", "+artefacts.traces=false"]
@@ -167,7 +167,7 @@ def test_replicate_k_is_the_same_dataset_whatever_the_number_asked(tmp_path):
     est = np.array([[p["estimate"] for p in r["params"]] for r in many])
     assert len({tuple(row) for row in est}) == 5
     # replicate 0 is the run a job without replicates makes
-    from study.pipeline import run_study
+    from study.run.pipeline import run_study
 
     one = run_study(compose("config", [*TINY, "seed=4"]))
     assert [p["estimate"] for p in one["params"]] == [p["estimate"] for p in many[0]["params"]]

@@ -12,7 +12,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from study.executor import run_guarded
+from study.run.executor import run_guarded
 from study.store import (NON_SCIENTIFIC_KEYS, ResultsFolderError, ResultStore, provenance, read_table, run_id,
                          validate_record)
 
@@ -355,13 +355,13 @@ def test_cli_rebuild_and_show(tmp_path):
     run_guarded(store, _conf(seed=2), lambda: {"status": "skipped", "error": "no sense", "metrics": {},
                                                 "params": [], "timings": {}}, seed=2)
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    p = subprocess.run([sys.executable, "-m", "study.results", "rebuild", "--root", str(tmp_path / "res")],
+    p = subprocess.run([sys.executable, "-m", "study", "results", "rebuild", "--root", str(tmp_path / "res")],
                        capture_output=True, text=True, cwd=tmp_path, env=env, timeout=120)
     assert p.returncode == 0, p.stderr
     assert "3 runs (1 ok, 1 failed, 1 skipped)" in p.stdout and "runs.parquet" in p.stdout
     runs = pd.read_parquet(tmp_path / "res" / "runs.parquet")
     assert len(runs) == 3 and len(pd.read_parquet(tmp_path / "res" / "params.parquet")) == 3
-    p = subprocess.run([sys.executable, "-m", "study.results", "show", "--root", str(tmp_path / "res")],
+    p = subprocess.run([sys.executable, "-m", "study", "results", "show", "--root", str(tmp_path / "res")],
                        capture_output=True, text=True, cwd=tmp_path, env=env, timeout=120)
     assert p.returncode == 0, p.stderr
     assert "1 ok, 1 failed, 1 skipped" in p.stdout and "ZeroDivisionError" in p.stdout
@@ -378,7 +378,7 @@ def _write_raw(store, name, rec):
 
 def _cli(*args, cwd):
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    return subprocess.run([sys.executable, "-m", "study.results", *args], capture_output=True, text=True, cwd=cwd,
+    return subprocess.run([sys.executable, "-m", "study", "results", *args], capture_output=True, text=True, cwd=cwd,
                           env=env, timeout=300)
 
 
@@ -573,7 +573,7 @@ def test_app_resumes_other_spellings_and_a_failed_collect_exits_nonzero(tmp_path
 def test_failed_collect_callback_exits_nonzero(tmp_path, capsys):
     from omegaconf import OmegaConf
 
-    from study.app import CollectResults
+    from study.commands.app import CollectResults
 
     store = ResultStore(tmp_path)
     run_guarded(store, _conf(), lambda: _result(), seed=0)
@@ -615,7 +615,7 @@ def test_run_id_of_composed_spellings_and_explicit_defaults():
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    from study.app import CONF_DIR
+    from study.commands.app import CONF_DIR
 
     spellings = [["noise=none"], ["noise=none", "noise.level=0"], ["noise=none", "noise.level=0.0"],
                  ["noise=none", "sim.duration_scale=1"], ["noise=none", "depth=deep", "depth.formula=kijima_1990"],
@@ -664,7 +664,7 @@ def test_code_change_invalidates_resume_and_force_reruns(tmp_path):
 
 
 def test_the_table_marks_rows_made_by_other_code(tmp_path):
-    from study import fingerprint
+    from study.store import fingerprint
 
     store = ResultStore(tmp_path)
     now = run_guarded(store, _conf(seed=1), lambda: _result(), seed=1)  # the current code's fingerprint
@@ -685,8 +685,8 @@ def test_the_table_marks_rows_made_by_other_code(tmp_path):
 def test_records_hashed_on_bytes_are_restamped_only_where_the_code_is_unchanged(tmp_path, capsys):
     """A record written before the executed-source fingerprint holds its files' bytes' fingerprint: restamped
     when today's bytes are the same (the same code ran), left for a re-run when they are not."""
-    from study import fingerprint
-    from study.results import main
+    from study.store import fingerprint
+    from study.commands.results import main
 
     store = ResultStore(tmp_path)
     now = run_guarded(store, _conf(seed=1), lambda: _result(), seed=1)["code"]
@@ -711,8 +711,8 @@ def test_fingerprint_follows_the_source_of_the_components_a_run_uses(tmp_path, m
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    from study import fingerprint
-    from study.app import CONF_DIR
+    from study.store import fingerprint
+    from study.commands.app import CONF_DIR
 
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         confs = {ov: OmegaConf.to_container(compose(config_name="config", overrides=[ov] if ov else []),
@@ -900,13 +900,13 @@ def test_a_corrupt_table_is_named_and_the_figures_command_says_so_in_one_line(tm
     (tmp_path / "records").mkdir()
     for name in ("runs.parquet", "params.parquet"):
         (tmp_path / name).write_bytes(b"not a parquet file")
-    with pytest.raises(TableError, match=r"runs\.parquet: not a readable parquet table .*python -m study\.results "
+    with pytest.raises(TableError, match=r"runs\.parquet: not a readable parquet table .*python -m study results "
                                          r"rebuild"):
         read_table(tmp_path / "runs.parquet")
-    p = subprocess.run([sys.executable, "-m", "study.figures", "--results", str(tmp_path), "--out",
+    p = subprocess.run([sys.executable, "-m", "study", "figures", "--results", str(tmp_path), "--out",
                         str(tmp_path / "figs")], capture_output=True, text=True, cwd=tmp_path, timeout=300,
                        env=dict(os.environ, PYTHONPATH=str(REPO)))
     lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
     assert p.returncode == 2 and len(lines) == 1, p.stderr
-    assert lines[0].startswith("study.figures: error: ") and "runs.parquet" in lines[0]
+    assert lines[0].startswith("study figures: error: ") and "runs.parquet" in lines[0]
     assert not (tmp_path / "figs").exists()

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from study.config import read_config
+from study.configuration.compose import read_config
 from study.identify.effects import effect_config, make_effect
 from study.identify.with_effects import EffectsProblem, identify_effects
 from study.sim import load_vessel
@@ -81,7 +81,7 @@ def test_propeller_thrust_refuses_records_without_thrust():
 
 @pytest.mark.parametrize("name", ["rudder_inflow", "propeller_thrust"])
 def test_refused_on_a_vessel_without_the_mmg_rudder_and_propeller(name):
-    from study.schema import Record
+    from study.records.schema import Record
     from study.sim import simulate
 
     mariner = read_config("vessel", "mariner")

@@ -7,8 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from study.loaders import DATASETS, list_real_records, load_esso_osaka, load_kvlcc2_hsva, load_real
-from study.schema import Record, SchemaError, from_arrays, read_record, read_records, validate, write_record
+from study.records.loaders import DATASETS, list_real_records, load_esso_osaka, load_kvlcc2_hsva, load_real
+from study.records.schema import Record, SchemaError, from_arrays, read_record, read_records, validate, write_record
 
 
 def good_frame(n=200):
@@ -79,7 +79,7 @@ def test_invalid_record_is_not_written(tmp_path):
 
 def test_simulate_cli_writes_a_valid_record_with_its_hidden_effect(tmp_path):
     out = tmp_path / "zz.csv"
-    args = [sys.executable, "-m", "study.simulate", "vessel=kvlcc2_l7", "maneuver=zigzag_10_10",
+    args = [sys.executable, "-m", "study", "simulate", "vessel=kvlcc2_l7", "maneuver=zigzag_10_10",
             "environment=current", "noise=low", "sim.duration=60", f"out={out}"]
     p = subprocess.run(args, capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr[-2000:]
@@ -96,10 +96,10 @@ REAL = [(ds, p) for ds in DATASETS for p in list_real_records(ds)]
 @pytest.mark.skipif(not REAL, reason="../shared/data/real not available")
 @pytest.mark.parametrize("dataset, path", REAL, ids=[p.name for _, p in REAL])
 def test_every_real_file_loads_valid(dataset, path):
-    """... and without a plausibility finding (study.plausibility: no error, no warning on real data)."""
+    """... and without a plausibility finding (study.records.plausibility: no error, no warning on real data)."""
     import warnings
 
-    from study.schema import RecordWarning
+    from study.records.schema import RecordWarning
 
     with warnings.catch_warnings():
         warnings.simplefilter("error", RecordWarning)

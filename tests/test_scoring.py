@@ -83,7 +83,7 @@ def test_both_sampling_settings_is_an_error_naming_them(tmp_path):
 
 def test_a_second_order_model_of_a_first_order_truth_is_degenerate_not_exact():
     from study.identify.models import make_model
-    from study.config import read_config
+    from study.configuration.compose import read_config
     from study.sim import load_vessel
 
     truth, how, exact = make_model(read_config("model", "nomoto2_nl"), load_vessel("kt1_mariner")).truth()

@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from study.maneuvers import get_maneuver
-from study.config import list_configs, read_config
+from study.sim.maneuvers import get_maneuver
+from study.configuration.compose import list_configs, read_config
 from study.sim import load_vessel, simulate
 from study.sim.effects import Current, RudderDynamics, ShallowWater, Wind, YawBias, _ankudinov, _kijima_1990
 

@@ -15,7 +15,7 @@ import pytest
 from numba import njit
 
 from simd_asm import packed_double_ops
-from study.maneuvers import get_maneuver
+from study.sim.maneuvers import get_maneuver
 from study.sim import fastmath as fm
 from study.sim import initial_state, integrator, load_vessel, run
 from study.sim.core import CTRL_OPEN, CTRL_ZIGZAG, ENV_NAMES

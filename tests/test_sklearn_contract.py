@@ -6,7 +6,7 @@ import warnings
 import numpy as np
 import pytest
 
-from study.config import read_config
+from study.configuration.compose import read_config
 from study.identify.estimators import list_estimators, make_estimator
 
 

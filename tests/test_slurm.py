@@ -208,7 +208,7 @@ def test_sweep_lands_every_record_once_and_records_a_failing_job(cluster, tmp_pa
     cmd = _sweep_cmd(results, name, "estimator=ls,lssvm,ridge", "seed=0,1",
                      "+estimator_overrides.ridge.alphas=[10.0,1.0,3]", "hydra.sweeper.max_batch_size=4")
     rc = _run_sweep(cmd, work, log, name)
-    # the sweep ends with its count, and exit status 1 for the failed runs (study.sweep_summary.sweep_finished)
+    # the sweep ends with its count, and exit status 1 for the failed runs (study.configuration.sweep_summary.sweep_finished)
     assert rc == 1 and "[study] sweep finished: 6 jobs, 2 failed, 4 ok" in log.read_text(errors="replace"), _tail(log)
     assert list(results.glob("logs/sweeps/*/*/.submitit")), "the sweep did not go through submitit"
 

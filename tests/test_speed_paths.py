@@ -24,7 +24,7 @@ from study.identify.estimators.bayes import LaplaceProposal
 from study.identify.models import make_model
 from study.identify.fit import make_problem
 from study.identify.structures import make_structure
-from study.measure import MeasurementModel
+from study.records.measure import MeasurementModel
 from study.sim import load_vessel, simulate
 
 

@@ -1,4 +1,4 @@
-"""State estimation (study/state_estimation/): u, v, r and their derivatives from positions and
+"""State estimation (study/records/state_estimation/): u, v, r and their derivatives from positions and
 heading by an EKF with an RTS smoother; the loader option ``states``; the smoothed structure's ``method: rts``;
 and the model doctor's verdict with estimated u, v, r.
 
@@ -26,11 +26,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from study.state_estimation import DEFAULTS, estimate_states, noise_std, resolve_options
+from study.records.state_estimation import DEFAULTS, estimate_states, noise_std, resolve_options
 from study.identify.structures import Segment, make_structure, savgol_interior
-from study.measure import MeasurementModel
-from study.schema import SchemaError, read_record, read_records
-from study.config import read_config
+from study.records.measure import MeasurementModel
+from study.records.schema import SchemaError, read_record, read_records
+from study.configuration.compose import read_config
 from study.sim import load_vessel, simulate
 
 HEADING_STD = math.radians(0.15)
@@ -308,8 +308,8 @@ def test_study_run_with_rts_structure(tmp_path):
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf
 
-    from study.app import CONF_DIR
-    from study.pipeline import run_study
+    from study.commands.app import CONF_DIR
+    from study.run.pipeline import run_study
 
     with initialize_config_dir(config_dir=CONF_DIR, version_base="1.3"):
         cfg = compose(config_name="config", overrides=["experiment=tiny", "structure=smoothed",
@@ -348,7 +348,7 @@ def test_doctor_gives_the_same_verdict_with_estimated_states(tmp_path):
     d1.run()
     rep1 = d1.report()
     # the same manoeuvres, measured as a sea trial: the truth vessel's records, GNSS noise, no u, v, r
-    from study.pipeline import resolve_effects
+    from study.run.pipeline import resolve_effects
 
     env = resolve_effects(example["environment"], float(truth_cfg["operation"]["U0"]))
     tv = load_vessel(truth_cfg, env)

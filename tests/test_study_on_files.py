@@ -1,5 +1,5 @@
 """The study on the user's own records (``python -m study train=<files> validate=<files> ...``,
-``study/records_run.py``): a run on files lands in the results table like any other, named by the records'
+``study/run/records_run.py``): a run on files lands in the results table like any other, named by the records'
 names and checksums; no simulation, no truth; each validation record replayed; bad input refused in one line.
 
 The records are simulated here (KVLCC2, noise-free, sampled at 0.5 s), so the test knows the truth the run does
@@ -19,10 +19,10 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import OmegaConf
 
-from study.app import CONF_DIR
-from study.pipeline import run_study, study_config
-from study.records_run import FILE_KEYS, RecordsInputError
-from study.executor import run_guarded
+from study.commands.app import CONF_DIR
+from study.run.pipeline import run_study, study_config
+from study.run.records_run import FILE_KEYS, RecordsInputError
+from study.run.executor import run_guarded
 from study.store import ResultStore, run_id
 
 REPO = Path(__file__).resolve().parents[1]
@@ -39,8 +39,8 @@ def _compose(name: str, overrides: list) -> dict:
 
 @pytest.fixture(scope="module")
 def data(tmp_path_factory) -> Path:
-    from study.schema import write_record
-    from study.simulate import make_record
+    from study.records.schema import write_record
+    from study.commands.simulate import make_record
 
     d = tmp_path_factory.mktemp("records")
     for name, (man, seed) in {**TRAIN, **VALIDATE}.items():

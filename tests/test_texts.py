@@ -17,6 +17,8 @@ from pathlib import Path
 
 import pytest
 
+from study.commands import names as command_names
+
 REPO = Path(__file__).resolve().parents[1]
 
 #: what must not appear, with why
@@ -97,10 +99,8 @@ def test_docstrings_of_the_package():
     assert not found, "\n".join(found)
 
 
-#: every command, with how it shows its help
-COMMANDS = [["study", "--help"], ["study.simulate", "--help"], ["study.diagnose", "--help"],
-            ["study.figures", "--help"], ["study.results", "--help"], ["study.reality_check", "--help"],
-            ["study.doctor.examples", "--help"], ["study.doctor.turn_prediction", "--help"]]
+#: every command (the app and each discovered command), with how it shows its help
+COMMANDS = [["study", "--help"]] + [["study", name, "--help"] for name in command_names()]
 
 
 def test_the_commands_help():
@@ -113,7 +113,7 @@ def test_the_commands_help():
         assert p.returncode == 0, f"python -m {' '.join(c)}: exit {p.returncode}\n{err}"
         assert len(out.strip().splitlines()) >= 3, f"python -m {' '.join(c)}: no help\n{out}"
         found += [f"python -m {' '.join(c)}: {x}" for x in problems(out)]
-        if c[0] in ("study", "study.simulate", "study.diagnose"):  # Hydra's help template, conf/hydra/help/
+        if c[1:2] in (["--help"], ["simulate"], ["diagnose"]):  # Hydra's help template, conf/hydra/help/
             assert "Example" in out and "Usage: python -m" in out, f"python -m {' '.join(c)}: no usage or example"
     assert not found, "\n".join(found)
 

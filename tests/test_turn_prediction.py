@@ -47,7 +47,7 @@ def test_fixed_rpm_and_own_self_propulsion_differ_when_resistance_does(case):
 
 
 def test_cli_without_the_hsva_files_says_so_in_one_line_and_exits_2(tmp_path):
-    p = subprocess.run([sys.executable, "-m", "study.doctor.turn_prediction", "--data", str(tmp_path),
+    p = subprocess.run([sys.executable, "-m", "study", "turn_prediction", "--data", str(tmp_path),
                         "--out", str(tmp_path / "out")], capture_output=True, text=True)
     assert p.returncode == 2
     assert p.stderr.strip().count("\n") == 0 and str(tmp_path) in p.stderr

@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from study.config import list_configs, read_config
+from study.configuration.compose import list_configs, read_config
 from study.sim import KINDS, accelerations, load_vessel, simulate
 from study.sim.effects import ShallowWater
 from study.sim.linearize import linear_sway_yaw, nomoto

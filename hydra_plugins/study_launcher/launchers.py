@@ -12,7 +12,7 @@ every plugin module each time), and composes every job's configuration from scra
 one Python process per run. Per job these launchers do only what a job needs (``runner``, ``compose``), with the
 same results: each job's configuration equal to Hydra's own composition, Hydra's ``run_job`` (output folder,
 logging, callbacks, JobReturn), the JobReturns in the jobs' order. Hydra only loads launchers from the
-``hydra_plugins`` namespace package, hence this package (registered by hand by ``study.app``, as the sweeper).
+``hydra_plugins`` namespace package, hence this package (registered by hand by ``study.commands.app``, as the sweeper).
 """
 # no `from __future__ import annotations`: Hydra execs plugin modules outside sys.modules (see covering_sweeper)
 

@@ -10,10 +10,10 @@ a particular combination of values would raise surfaces when the launcher compos
 finished before it stay in the results table and the next start resumes them. `validate_all: true` restores
 Hydra's behaviour. Hydra only loads sweepers from the `hydra_plugins` namespace package, hence this module.
 
-Each composed config is also checked by the study's own rules (`study.settings.check_run`: zero, negative or
+Each composed config is also checked by the study's own rules (`study.run.settings.check_run`: zero, negative or
 non-finite values, unknown estimator hyper-parameters), so such a sweep is refused before any job runs. The
 sweep's number of jobs is exported (`STUDY_SWEEP_JOBS`) for the progress lines (`job 12/66`), and when the
-sweep ends `study.sweep_summary.sweep_finished` counts its jobs by status (a failed run makes the command's exit status
+sweep ends `study.configuration.sweep_summary.sweep_finished` counts its jobs by status (a failed run makes the command's exit status
 non-zero).
 """
 # no `from __future__ import annotations`: Hydra execs plugin modules outside sys.modules, and dataclasses
@@ -99,7 +99,7 @@ class CoveringSweeper(BasicSweeper):
         self._checked = True
         returns = super().sweep(arguments)
         try:
-            from study.sweep_summary import sweep_finished
+            from study.configuration.sweep_summary import sweep_finished
         except ImportError:
             return returns
         sweep_finished([r.return_value for batch in returns for r in batch])
@@ -109,7 +109,7 @@ class CoveringSweeper(BasicSweeper):
 def _study_check():
     """The study's configuration check (None outside the study package)."""
     try:
-        from study.settings import check_run
+        from study.run.settings import check_run
     except ImportError:
         return None
     return check_run

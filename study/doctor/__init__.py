@@ -1,5 +1,5 @@
 """The model doctor: compare a model with measurements, show where it fails, name the missing physical effect,
-add it and watch the error fall (``python -m study.diagnose``).
+add it and watch the error fall (``python -m study diagnose``).
 
 - :mod:`.run`: the doctor from a resolved configuration (records read, report folder held, runs logged);
 - :mod:`.diagnose`: baseline, candidates ranked by out-of-sample improvement, the error ladder, the verdict;
@@ -11,6 +11,6 @@ add it and watch the error fall (``python -m study.diagnose``).
 
 What the doctor uses is not its own: identification with a set of effects and its replay through records is
 ``study.identify.with_effects``, the catalogue of candidate effects ``study.identify.effects`` (``.effects`` here
-keeps the old name for effects written against it), the record checks ``study.vessel_checks``, the manoeuvre
-metrics ``study.maneuver_metrics``.
+keeps the old name for effects written against it), the record checks ``study.records.vessel_checks``, the manoeuvre
+metrics ``study.records.maneuver_metrics``.
 """

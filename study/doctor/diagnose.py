@@ -20,12 +20,12 @@
    candidates ranked again on top of it, and so on while a significant one remains. A step whose validation
    error, refined, is not at least ``min_improvement`` lower than the step before is rejected: the ladder stops
    and says why.
-6. **The place** (``study.facility``): a candidate that needs what the training records' facility lacks (wind
+6. **The place** (``study.records.facility``): a candidate that needs what the training records' facility lacks (wind
    indoors, a current in still water) is not tried; a fitted candidate that is physically implausible there (a
    pond's current faster than the wind's drift) is rejected with the reason and never significant.
 7. **Set-up effects** (an effect whose class says ``setup_effect``: a yaw bias, a rudder zero offset) belong to
    the set-up the training records were measured in: they are left out of the prediction of a record measured in
-   another facility or at another scale (``study.facility.other_setup``) unless ``keep_setup_effects``; the report
+   another facility or at another scale (``study.records.facility.other_setup``) unless ``keep_setup_effects``; the report
    says which were left out, and of which records.
 8. **Divergence**: a replay that leaves the physical envelope (``fit.ENVELOPE``) or overflows is *diverged*:
    it has no error to compare. A diverged baseline gets a headline of its own and no missing effect; a
@@ -38,7 +38,7 @@ import time
 
 import numpy as np
 
-from .. import facility as fac
+from study.records import facility as fac
 from ..identify.effects import list_effects, registry
 from ..identify.with_effects import (CHANNELS, UNITS, EffectsProblem, Fit, identify_effects, record_errors,
                                      validation_error)
@@ -78,11 +78,11 @@ class Doctor:
         self.train_names = _names(self.train)
         self.val_names = _names(self.validate) if self.validate else self.train_names
         self.check_messages = []
-        from ..vessel_checks import check_envelope
+        from study.records.vessel_checks import check_envelope
 
         check_envelope(vessel_cfg, self.train + self.validate)  # no measurement, whatever checks= says
         if self.opt.checks != "off":
-            from ..vessel_checks import check_records
+            from study.records.vessel_checks import check_records
 
             self.check_messages = check_records(vessel_cfg, self.train + self.validate,
                                                 strict=self.opt.checks == "error")

@@ -1,8 +1,8 @@
-"""``python -m study.doctor.examples``: the doctor's five worked examples, rebuilt into ``paper_figs/doctor/``.
+"""``python -m study doctor_examples``: the doctor's five worked examples, rebuilt into ``paper_figs/doctor/``.
 
 1. ``simulated_current``: the README's example -- five records of the 7 m KVLCC2 made by ``python -m
-   study.simulate`` with a hidden current (10 % of the speed towards the north-east), 1 % noise; the model is the
-   vessel's own (``known``).
+   study simulate`` with a hidden current (10 % of the speed towards the north-east), 1 % noise; the model is
+   the vessel's own (``known``).
 2. ``esso_osaka``: the Esso Osaka 3 m model's free-running zigzags (training) and its 14 turning circles
    (validation), Osaka University's pond, with its measured wind; the model is ``esso_osaka`` as configured (its
    empirical hull from the main particulars, KVLCC2's interaction coefficients as a labelled stand-in).
@@ -14,7 +14,7 @@
    set): the user's normal case.
 
 Each writes ``<out>/<example>/`` (report.html, report.json, figures/) and the summary ``<out>/README.md``. The
-committed ones are ``paper_figs/doctor/``: ``python -m study.doctor.examples --out paper_figs/doctor --overwrite``
+committed ones are ``paper_figs/doctor/``: ``python -m study doctor_examples --out paper_figs/doctor --overwrite``
 rebuilds them; by default the examples go to ``doctor_examples/`` in the current folder, and a folder that holds a
 report is never replaced without ``--overwrite``. The real data are read in place (``../shared/data/real``); an
 example whose data are missing is skipped and listed as such. The runs are not logged in the results table.
@@ -38,7 +38,7 @@ def simulated_current(tmp: Path, out: Path = DEFAULT_OUT, overwrite: bool = Fals
 
     for m, stem in (("zigzag_10_10", "train_zz10"), ("zigzag_20_20", "train_zz20"), ("random_rudder", "train_rr"),
                     ("zigzag_20_10", "val_zz2010"), ("turning_35", "val_turn35")):
-        subprocess.run([sys.executable, "-m", "study.simulate", "vessel=kvlcc2_l7", f"maneuver={m}",
+        subprocess.run([sys.executable, "-m", "study", "simulate", "vessel=kvlcc2_l7", f"maneuver={m}",
                         "environment=current", "noise=low_relative", "noise.sample_dt=0.1", "sim.duration=300",
                         f"seed={len(stem)}", f"out={tmp / stem}.csv"], check=True, capture_output=True)
     from .run import diagnose_conf, run
@@ -49,7 +49,7 @@ def simulated_current(tmp: Path, out: Path = DEFAULT_OUT, overwrite: bool = Fals
 
 def esso_osaka(out: Path = DEFAULT_OUT, overwrite: bool = False) -> dict:
     from .run import diagnose_conf, run
-    from ..loaders import real_data_dir
+    from study.records.loaders import real_data_dir
 
     d = real_data_dir() / "esso_osaka_frt" / "data"
     return run(diagnose_conf(vessel="esso_osaka", train=f"{d}/zigzag/*.csv", validate=f"{d}/turning/*.csv",
@@ -61,7 +61,7 @@ def esso_osaka_identified(out: Path = DEFAULT_OUT, overwrite: bool = False) -> d
     set), anchored to its empirical prior (the config's hull), validated on all 14 measured turning circles: a
     turn from zigzags, on real records."""
     from .run import diagnose_conf, run
-    from ..loaders import real_data_dir
+    from study.records.loaders import real_data_dir
 
     d = real_data_dir() / "esso_osaka_frt" / "data"
     return run(diagnose_conf(vessel="esso_osaka", model="mmg_hull", train=f"{d}/zigzag/*.csv,{d}/random/*.csv",
@@ -70,7 +70,7 @@ def esso_osaka_identified(out: Path = DEFAULT_OUT, overwrite: bool = False) -> d
 
 def kvlcc2_hsva(out: Path = DEFAULT_OUT, overwrite: bool = False) -> dict:
     from .run import diagnose_conf, run
-    from ..loaders import real_data_dir
+    from study.records.loaders import real_data_dir
 
     d = real_data_dir() / "kvlcc2_hsva" / "raw_data"
     return run(diagnose_conf(vessel="kvlcc2_l7", train=f"{d}/HSVA_CPMC_KVLCC2_Z_*_0?.dat",
@@ -81,7 +81,7 @@ def kvlcc2_hsva_identified(out: Path = DEFAULT_OUT, overwrite: bool = False) -> 
     """The HSVA zigzags again, with the MMG hull identified from them (anchored to the published set): the
     user's normal case."""
     from .run import diagnose_conf, run
-    from ..loaders import real_data_dir
+    from study.records.loaders import real_data_dir
 
     d = real_data_dir() / "kvlcc2_hsva" / "raw_data"
     return run(diagnose_conf(vessel="kvlcc2_l7", model="mmg_hull", train=f"{d}/HSVA_CPMC_KVLCC2_Z_*_0?.dat",
@@ -156,10 +156,10 @@ def _summary(name: str, rep: dict) -> list:
 
 
 def main(argv=None) -> int:
-    from ..cli import OutputExistsError, parser
-    from ..settings import existing_report
+    from study.configuration.cli import OutputExistsError, parser
+    from study.run.settings import existing_report
 
-    ap = parser("study.doctor.examples", "The model doctor's five worked examples (see the module's docstring).")
+    ap = parser("study doctor_examples", "The model doctor's five worked examples (see the module's docstring).")
     ap.add_argument("--out", default=str(DEFAULT_OUT),
                     help=f"output folder (default {DEFAULT_OUT}/ in the current folder; the committed examples: "
                          f"--out paper_figs/doctor --overwrite)")
@@ -173,12 +173,12 @@ def main(argv=None) -> int:
         raise OutputExistsError(f"--out {out}: already holds {', '.join(there[:3])}{' ...' if len(there) > 3 else ''}"
                                 "; refusing to overwrite them (--overwrite to overwrite them, or another --out)")
     if any(n != "simulated_current" for n in names):  # the real-data examples: say where the data were looked for
-        from ..loaders import require_real_records
+        from study.records.loaders import require_real_records
 
         for ds in ("esso_osaka", "kvlcc2_hsva"):
-            require_real_records(ds)  # RealDataMissing (a FileNotFoundError): one line, exit 2 (study.cli)
+            require_real_records(ds)  # RealDataMissing (a FileNotFoundError): one line, exit 2 (study.configuration.cli)
     out.mkdir(parents=True, exist_ok=True)
-    lines = ["# The model doctor's worked examples", "", "Rebuilt by `python -m study.doctor.examples` (see its "
+    lines = ["# The model doctor's worked examples", "", "Rebuilt by `python -m study doctor_examples` (see its "
              "docstring for the data and the models); never edited by hand.", "",
              "Data: Esso Osaka free-running tests, Osaka University (Wakita et al. 2022; Miyauchi et al. 2022), "
              "CC BY-NC-SA 4.0: the `esso_osaka/` figures are derived from them and carry that licence. KVLCC2: "
@@ -212,9 +212,3 @@ def main(argv=None) -> int:
 EXAMPLES = {"simulated_current": simulated_current, "esso_osaka": esso_osaka,
             "esso_osaka_identified": esso_osaka_identified, "kvlcc2_hsva": kvlcc2_hsva,
             "kvlcc2_hsva_identified": kvlcc2_hsva_identified}
-
-
-if __name__ == "__main__":
-    from ..cli import run
-
-    run(main, "study.doctor.examples")

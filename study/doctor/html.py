@@ -75,7 +75,7 @@ def render_html(report: Report | dict, figures: Mapping[str, bytes] | None = Non
 
 
 def metrics_table_html(rows: list[dict]) -> str:
-    """A small self-contained HTML ``<table class="maneuver-metrics">`` of ``study.maneuver_metrics.maneuver_metrics``
+    """A small self-contained HTML ``<table class="maneuver-metrics">`` of ``study.records.maneuver_metrics.maneuver_metrics``
     rows: record, metric (its definition as a tooltip), unit, measured, baseline, final (with its 90 % interval
     under it when the row has one); numbers to 4 significant digits, NaN as ``n/a``; every string escaped. No
     rows: a table with one row saying so."""

@@ -204,10 +204,10 @@ def errors(r: Report) -> dict | None:
 
 
 def metric_rows(rows: list, bdiv: set = frozenset(), fdiv: set = frozenset()) -> list:
-    """The manoeuvre metrics' rows (``study.maneuver_metrics.maneuver_metrics``): record, metric with its
+    """The manoeuvre metrics' rows (``study.records.maneuver_metrics.maneuver_metrics``): record, metric with its
     definition, unit, and measured, baseline and final (each with its 90 % interval when it has one); a replay
     that diverged has no metric, and says so."""
-    from ..maneuver_metrics import COLUMNS, TURNING_METRICS, ZIGZAG_METRICS
+    from study.records.maneuver_metrics import COLUMNS, TURNING_METRICS, ZIGZAG_METRICS
 
     descriptions = {m: d for m, _, d in TURNING_METRICS + ZIGZAG_METRICS}
     out = []
@@ -225,7 +225,7 @@ def metric_rows(rows: list, bdiv: set = frozenset(), fdiv: set = frozenset()) ->
 def maneuvers(r: Report) -> dict | None:
     if r.maneuver_metrics is None:
         return None
-    from ..maneuver_metrics import TURNING_METRICS, ZIGZAG_METRICS
+    from study.records.maneuver_metrics import TURNING_METRICS, ZIGZAG_METRICS
 
     rows = r.maneuver_metrics
     bdiv, fdiv = set(base_diverged(r)), set(final_diverged(r))

@@ -118,7 +118,7 @@ def replay_start(df: pd.DataFrame, U0: float) -> float | None:
     """Where a record's prediction starts: its manoeuvre's start (``maneuver_metrics.manoeuvre_start``); for a
     record with none that starts below half the service speed, the first time it reaches it; else None (the
     whole record). NaN when it never reaches it (no prediction at speed to compare)."""
-    from ..maneuver_metrics import manoeuvre_start
+    from study.records.maneuver_metrics import manoeuvre_start
 
     t0 = manoeuvre_start(df)
     if t0 is not None:
@@ -156,9 +156,9 @@ def rms_yaw_rate(frame, measured, U0: float) -> float:
 
 def metric_values(name: str, measured: pd.DataFrame, frame, L: float, U0: float) -> dict:
     """{metric: value} of ``frame`` (a replay of the record ``measured``, or the record itself), the manoeuvre
-    metrics of ``study.maneuver_metrics`` (from the measured record's switch heading) and the RMS yaw rate at
+    metrics of ``study.records.maneuver_metrics`` (from the measured record's switch heading) and the RMS yaw rate at
     speed (:func:`rms_yaw_rate`)."""
-    from ..maneuver_metrics import maneuver_metrics
+    from study.records.maneuver_metrics import maneuver_metrics
 
     if frame is None:
         return {}

@@ -24,7 +24,7 @@ TURNS = (("35 deg turning circle to starboard", "turning_35"),
          ("35 deg turning circle to port", {"name": "turning_35_port", "type": "turning", "first": "port",
                                             "t_start": 10.0, "amp_deg": 35.0, "pullout_deg": 540.0,
                                             "duration_L": 60.0}))
-#: the turning-circle metrics a predicted turn gives (``study.metrics.turning_metrics``), in ship lengths
+#: the turning-circle metrics a predicted turn gives (``study.records.metrics.turning_metrics``), in ship lengths
 TURN_METRICS = ("tactical_diameter_L", "advance_L", "transfer_L")
 #: a coefficient is named as a carrier of a metric when its share of the variance is at least this
 MIN_SHARE = 0.05
@@ -153,7 +153,7 @@ def extrapolation_text(dist: dict, env_pred: dict, env_train: dict) -> str:
 
 # ---------------------------------------------------------------------------------------------- a turn's metrics
 def _turn_values(df, L: float) -> dict:
-    from .. import metrics as M
+    from study.records import metrics as M
 
     try:
         m = M.turning_metrics(df, L=L)
@@ -211,7 +211,7 @@ def setup_effects_left_out(problem, fit, facility: str | None = None, scale: str
                            keep_setup_effects: bool = False) -> tuple:
     """(``fit`` for a prediction in ``facility`` at ``scale``, the set-up effects left out, why): the set-up effects
     are left out unless kept, or the prediction's facility and scale are the training records' own."""
-    from ..facility import other_setup, setup_of
+    from study.records.facility import other_setup, setup_of
 
     drop = [e for e in fit.effects if getattr(problem.effect(e), "setup_effect", False)]
     if not drop or keep_setup_effects:

@@ -68,7 +68,7 @@ def manoeuvre_predictions(doctor, ev, whole: dict) -> dict:
     """The replays the manoeuvre metrics compare: a record whose manoeuvre starts after an approach
     (``maneuver_metrics.manoeuvre_start``) replayed from the measured state at that start; any other record's
     whole-record replay (``whole``, from :func:`predictions`)."""
-    from ..maneuver_metrics import manoeuvre_start
+    from study.records.maneuver_metrics import manoeuvre_start
 
     out = dict(whole)
     if doctor.mode == "given":
@@ -94,10 +94,10 @@ def _metrics_error(rows: list, col: str) -> tuple:
 
 def candidate_metrics(doctor, rep: dict, meas: dict, mb: dict) -> None:
     """Beside each ranked candidate's validation error, its effect on the validation manoeuvres' metrics (tactical
-    diameter, advance, overshoots...: ``study.maneuver_metrics``): the mean relative error of the metrics the
+    diameter, advance, overshoots...: ``study.records.maneuver_metrics``): the mean relative error of the metrics the
     baseline and the candidate can both be measured on, and a note when the candidate lowers the NRMSE but worsens
     the metrics. Without turning circles or zigzags among the validation records a row gets none."""
-    from ..maneuver_metrics import maneuver_metrics
+    from study.records.maneuver_metrics import maneuver_metrics
 
     given = tuple(doctor.result["base"].effects)
     for row in rep["ranking"]:
@@ -146,7 +146,7 @@ def write_report(doctor, out_dir, vessel: str, model: str, overwrite: bool = Fal
     _interval_figure(mm, figs, listing)
     _put_figures(out, figs)
     report = Report(**_jsonable(rep), title=f"Model doctor: {model} on {vessel}",
-                    created_by="python -m study.diagnose", vessel=vessel, model=model,
+                    created_by="python -m study diagnose", vessel=vessel, model=model,
                     structure=doctor.problem.structure.name, worst_windows=windows, catalogue=catalogue_rows(doctor),
                     figures=listing, maneuver_metrics=mm, prediction_uncertainty=uncertainty,
                     conventions=CONVENTIONS, definitions=DEFINITIONS, provenance=provenance(doctor))
@@ -213,7 +213,7 @@ def _figures(doctor, rep: dict, meas: dict, pb: dict, pf: dict) -> tuple:
 def _manoeuvres(doctor, rep: dict, meas: dict, pb: dict, pf: dict) -> tuple:
     """(the manoeuvre metrics rows of every record, baseline and final, with their intervals; the predicted
     turns and what carries them); each candidate's effect on the metrics is added to ``rep``'s ranking."""
-    from ..maneuver_metrics import maneuver_metrics
+    from study.records.maneuver_metrics import maneuver_metrics
     from .uncertainty import annotate
 
     base, final = doctor.result["base"], doctor.result["final"]

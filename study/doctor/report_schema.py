@@ -129,7 +129,7 @@ class FigureEntry(TypedDict):
 
 class ManoeuvreMetricRow(TypedDict):
     """A manoeuvre metric of a validation record, measured and predicted (``maneuver_metrics``; the rows of
-    ``study.maneuver_metrics.maneuver_metrics`` with their intervals from ``study.doctor.uncertainty``)."""
+    ``study.records.maneuver_metrics.maneuver_metrics`` with their intervals from ``study.doctor.uncertainty``)."""
 
     record: str
     metric: str  # tactical_diameter, first_overshoot...

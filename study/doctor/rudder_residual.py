@@ -8,7 +8,7 @@ not change with the rudder angle; a rudder too weak or too strong leaves a ramp,
 port and to starboard (the flow straightening gamma_R of Yasukawa & Yoshimura 2015, eq. 24, taken as one value
 where the ship has two) a kink at zero. A dict of plain numbers, for a report's data.
 
-``python -m study.doctor.rudder_residual`` writes the KVLCC2 case (HSVA's zigzags, the doctor's training records in
+``python -m study rudder_residual`` writes the KVLCC2 case (HSVA's zigzags, the doctor's training records in
 ``study.doctor.examples``; ``../shared/data/real``) to ``<out>/kvlcc2_rudder_residual.{json,md}`` (default
 ``rudder_residual/`` in the current folder): the published set and the hull identified from the records (the
 doctor's anchor, 30 %), each with no effect, the yaw bias, the rudder's inflow free, both, and the propeller from
@@ -51,9 +51,9 @@ def residual_by_rudder(problem, fit, names=None, bins=BINS_DEG) -> dict:
 
 def kvlcc2_hsva(data_dir=None) -> dict:
     """The KVLCC2 case (see the module docstring): model -> effects -> residual table, errors, parameters."""
-    from ..config import read_config
+    from study.configuration.compose import read_config
     from ..identify.with_effects import EffectsProblem, identify_effects, record_errors, validation_error
-    from ..loaders import load_records, real_data_dir
+    from study.records.loaders import load_records, real_data_dir
 
     d = Path(data_dir) if data_dir else real_data_dir() / "kvlcc2_hsva" / "raw_data"
     train = load_records(str(d / "HSVA_CPMC_KVLCC2_Z_*_0?.dat"))
@@ -82,7 +82,7 @@ def write(res: dict, out: Path) -> list:
     js.write_text(json.dumps(res, indent=1))
     head = None
     lines = ["# KVLCC2 (L7): the residual yaw moment against the rudder angle on HSVA's zigzags", "",
-             "Written by `python -m study.doctor.rudder_residual` (study/doctor/rudder_residual.py). Mean residual "
+             "Written by `python -m study rudder_residual` (study/doctor/rudder_residual.py). Mean residual "
              "N' x 1e4 (non-dimensional by 0.5 rho L^2 d U0^2) of the training rows per rudder-angle bin [deg, + to "
              "starboard]; spread: largest minus smallest bin mean; validation error: the doctor's (mean NRMSE of "
              "u, v, r, psi over HSVA's 10/10 and 20/10 zigzags).", ""]
@@ -103,9 +103,9 @@ def write(res: dict, out: Path) -> list:
 
 
 def main(argv=None) -> int:
-    from ..cli import OutputExistsError, parser
+    from study.configuration.cli import OutputExistsError, parser
 
-    ap = parser("study.doctor.rudder_residual", "KVLCC2's residual yaw moment against the rudder angle (HSVA)")
+    ap = parser("study rudder_residual", "KVLCC2's residual yaw moment against the rudder angle (HSVA)")
     ap.add_argument("--out", default=str(DEFAULT_OUT), help=f"output folder (default {DEFAULT_OUT}/)")
     ap.add_argument("--overwrite", action="store_true", help="replace the table already in the output folder")
     ap.add_argument("--data", default=None, help="folder of HSVA's .dat files (default: the real-data folder)")
@@ -117,9 +117,3 @@ def main(argv=None) -> int:
     for p in write(kvlcc2_hsva(args.data), out):
         print(p)
     return 0
-
-
-if __name__ == "__main__":
-    from ..cli import run
-
-    run(main, "study.doctor.rudder_residual")

@@ -1,7 +1,7 @@
-"""The model doctor run from a resolved configuration (``conf/diagnose.yaml``): what ``python -m study.diagnose``,
+"""The model doctor run from a resolved configuration (``conf/diagnose.yaml``): what ``python -m study diagnose``,
 its worked examples (``study.doctor.examples``) and the tests call.
 
-``run(conf)`` checks the settings, reads the records (``study.loaders.load_records``), holds the output folder
+``run(conf)`` checks the settings, reads the records (``study.records.loaders.load_records``), holds the output folder
 (``claimed``), runs the doctor (``study.doctor.diagnose``), writes its report and logs each ladder step as a run
 of the results table (``log_runs``, study ``doctor``); ``diagnose_conf(**over)`` composes the configuration as
 the command does.
@@ -12,12 +12,12 @@ import contextlib
 import hashlib
 from pathlib import Path
 
-from ..config import compose
-from ..loaders import load_records
+from study.configuration.compose import compose
+from study.records.loaders import load_records
 
 
 def diagnose_conf(**over) -> dict:
-    """The doctor's configuration as ``python -m study.diagnose`` composes it (``vessel``, ``model`` as its
+    """The doctor's configuration as ``python -m study diagnose`` composes it (``vessel``, ``model`` as its
     overrides), the other keys of ``over`` set on it; its runs are not logged in the results table."""
     conf = compose("diagnose", [f"{k}={v}" for k, v in over.items() if k in ("vessel", "model")])
     conf.update(log_runs=False, overwrite=False)
@@ -54,7 +54,7 @@ def _truths(records) -> dict:
 
 def log_runs(conf: dict, doctor, rep: dict, train, validate) -> list:
     """Each ladder step as one run of the results table (study 'doctor')."""
-    from ..executor import run_guarded
+    from study.run.executor import run_guarded
     from ..store import ResultStore
 
     store = ResultStore(conf.get("results_dir") or Path(conf["out"]) / "results")
@@ -90,10 +90,10 @@ def log_runs(conf: dict, doctor, rep: dict, train, validate) -> list:
 
 
 def _check_place(conf: dict) -> None:
-    """The vessel config's ``facility`` (one of ``study.facility.FACILITIES``) and ``keep_setup_effects`` (a
+    """The vessel config's ``facility`` (one of ``study.records.facility.FACILITIES``) and ``keep_setup_effects`` (a
     boolean), refused in one line before any work."""
-    from ..cli import ConfigError
-    from ..facility import check
+    from study.configuration.cli import ConfigError
+    from study.records.facility import check
 
     vessel = conf.get("vessel") or {}
     check(vessel.get("facility"), f"conf/vessel/{vessel.get('name')}.yaml")
@@ -111,8 +111,8 @@ def claimed(out: Path, overwrite: bool):
 
     from filelock import FileLock, Timeout
 
-    from ..cli import OutputExistsError
-    from ..settings import existing_report
+    from study.configuration.cli import OutputExistsError
+    from study.run.settings import existing_report
 
     made = [p for p in (out, *out.parents) if not p.exists()]  # what this doctor creates (removed if refused)
     out.mkdir(parents=True, exist_ok=True)
@@ -120,7 +120,7 @@ def claimed(out: Path, overwrite: bool):
     try:
         lock.acquire(timeout=0)
     except Timeout:
-        raise OutputExistsError(f"out={out}: another python -m study.diagnose is writing a report there") from None
+        raise OutputExistsError(f"out={out}: another python -m study diagnose is writing a report there") from None
     refused = True
     try:
         there = existing_report(out)
@@ -150,7 +150,7 @@ PARTIAL_FIGURES = ".figures.partial"
 
 def run(conf: dict) -> dict:
     """Run the doctor from a resolved config (what the CLI and the tests call)."""
-    from ..settings import check_diagnose
+    from study.run.settings import check_diagnose
     from ..sim.effects import ShallowWater, apply_effects
     from .diagnose import Doctor, Options
     from .report import write_report

@@ -13,7 +13,7 @@ records:
     S = sqrt( mean_t sum_c ((a_c(t) - b_c(t)) / s_c)^2 ),
 
 over the velocities both simulate and the records hold (u, v, r), where s_c is the larger of the channel's white
-measurement noise (the difference method, :func:`study.state_estimation.noise_std`) and the RMS misfit of the
+measurement noise (the difference method, :func:`study.records.state_estimation.noise_std`) and the RMS misfit of the
 first candidate's replays of the records in hand. Heading and positions are left out: they integrate the
 velocities, so any small difference between two fits grows along a long manoeuvre. Why the misfit and not the
 sensor noise alone: on real records the model's own error is far larger than the sensors' (and velocities derived
@@ -42,7 +42,7 @@ SEPARATES = 2.0
 def channel_noise(records: list) -> dict:
     """Each channel's white-noise sd over the records (the median of the records' difference-method estimates);
     channels whose estimate is zero (noise-free or quantised to nothing) are left out."""
-    from ..state_estimation import noise_std
+    from study.records.state_estimation import noise_std
 
     out = {}
     for c in CHANNELS:
@@ -89,7 +89,7 @@ def misfit(problem, fit, records: list, infos=None) -> dict:
 
 
 def _maneuver(name: str, side: str) -> dict:
-    from ..config import read_config
+    from study.configuration.compose import read_config
 
     cfg = dict(read_config("maneuver", name))
     cfg["first"] = side

@@ -16,7 +16,7 @@ Choices, labelled:
   the point estimate's rpm (their own resistance differs little: R'0 is among the best-determined coefficients);
   every other model at its own.
 - *Set-up effects*: an effect of the training records' test set-up (``setup_effect``: a yaw bias, a rudder zero
-  offset; ``study.facility``) is left out of a turn predicted for another facility or scale: ``facility`` names
+  offset; ``study.records.facility``) is left out of a turn predicted for another facility or scale: ``facility`` names
   the facility the turn is predicted for (None: not stated, taken as another set-up than the training records',
   since a manoeuvre nobody measured was not run in their set-up), ``keep_setup_effects`` keeps them. The result
   says which were left out (``setup_left_out``).
@@ -27,7 +27,7 @@ Choices, labelled:
   (an assumption; ``study.doctor.prediction_interval``).
   ``td_low``/``td_high`` keep the draws' interval alone (identification spread only), for comparison.
 
-``python -m study.doctor.turn_prediction`` writes the KVLCC2 case (HSVA's zigzags, ``../shared/data/real``) to
+``python -m study turn_prediction`` writes the KVLCC2 case (HSVA's zigzags, ``../shared/data/real``) to
 ``<out>/kvlcc2_turn_from_zigzags.{md,csv}`` (default ``turn_prediction/`` in the current folder; the committed
 table: ``--out paper_figs/doctor --overwrite``): the published set against the hull identified from the zigzags
 under the doctor's settings and under other reasonable ones, each turned to both sides.
@@ -86,7 +86,7 @@ def kvlcc2_hsva_table(data_dir=None, draws: int = 64) -> pd.DataFrame:
     that fit as well count among its alternatives), and to starboard at HSVA's measured rpm."""
     from ..identify.effects import list_effects, registry
     from ..identify.with_effects import EffectsProblem, Fit, identify_effects
-    from ..loaders import load_records, real_data_dir
+    from study.records.loaders import load_records, real_data_dir
     from .model_error import calibrate
     from .predictions import TURNS
     from .run import diagnose_conf
@@ -172,7 +172,7 @@ def write_table(df: pd.DataFrame, out: Path, draws: int = 64) -> list[Path]:
     lines = _carrier_lines(df.attrs["details"][default]) if default in df.attrs.get("details", {}) else []
     md.write_text(
         "# KVLCC2 (L7): the 35 deg turn predicted from HSVA's zigzags\n\n"
-        "Written by `python -m study.doctor.turn_prediction` (study/doctor/turn_prediction.py). Training: HSVA's "
+        "Written by `python -m study turn_prediction` (study/doctor/turn_prediction.py). Training: HSVA's "
         f"free-running zigzags with 1-5 deg switch headings ({len(df.attrs['records'])} records, "
         "../shared/data/real/kvlcc2_hsva); every model turned at 35 deg to either side from HSVA's approach speed "
         f"({df.attrs['u0']:.3f} m/s) at its own self-propulsion rpm (SIMMAN 2008's rule), and to starboard at "
@@ -190,15 +190,15 @@ def write_table(df: pd.DataFrame, out: Path, draws: int = 64) -> list[Path]:
 
 
 def main(argv=None) -> int:
-    from ..cli import OutputExistsError, parser
+    from study.configuration.cli import OutputExistsError, parser
 
-    ap = parser("study.doctor.turn_prediction", "KVLCC2's 35 deg turn predicted from HSVA's zigzags, with intervals")
+    ap = parser("study turn_prediction", "KVLCC2's 35 deg turn predicted from HSVA's zigzags, with intervals")
     ap.add_argument("--out", default=str(DEFAULT_OUT), help=f"output folder (default {DEFAULT_OUT}/ in the current "
                     "folder; the committed table: --out paper_figs/doctor --overwrite)")
     ap.add_argument("--overwrite", action="store_true", help="replace the table already in the output folder")
     ap.add_argument("--data", default=None, help="folder of HSVA's .dat files (default: the real-data folder)")
     args = ap.parse_args(argv)
-    from ..loaders import real_data_dir
+    from study.records.loaders import real_data_dir
 
     there = [f for f in FILES if (Path(args.out) / f).exists()]
     if there and not args.overwrite:  # before any work
@@ -212,9 +212,3 @@ def main(argv=None) -> int:
         print(p)
     print(df.to_string(index=False))
     return 0
-
-
-if __name__ == "__main__":
-    from ..cli import run
-
-    run(main, "study.doctor.turn_prediction")

@@ -104,7 +104,7 @@ def model_uncertainty(doctor, ev, rows: list, frames: dict, role: str, tie: floa
     """Fill ``<role>_low``, ``<role>_high`` and ``<role>_uncertainty`` of the ``maneuver_metrics`` rows of the
     model ``ev`` (``frames``: its replays, by record), and with ``sensitivity`` the rows' ``carriers`` and the
     records' extrapolation. Returns the section's part for this model."""
-    from ..maneuver_metrics import manoeuvre_start
+    from study.records.maneuver_metrics import manoeuvre_start
 
     pb0 = doctor.problem
     L, U0 = pb0.L, pb0.U0

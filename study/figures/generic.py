@@ -1,4 +1,4 @@
-"""Figures for any sweep: what ``python -m study.figures`` builds from runs that no named study claims.
+"""Figures for any sweep: what ``python -m study figures`` builds from runs that no named study claims.
 
 A sweep of one's own (``python -m study -m structure=euler,central estimator=ls,ridge ...``) gets a comparison of
 whatever it varied: the coefficient error of every dataset by estimator and structure, the held-out prediction

@@ -1,4 +1,4 @@
-"""Generic figure and table builders of ``python -m study.figures``: where outputs go (:class:`Builder`: PNG and PDF
+"""Generic figure and table builders of ``python -m study figures``: where outputs go (:class:`Builder`: PNG and PDF
 figures, CSV and Markdown tables, byte-stable between rebuilds), the results table as the figures read it
 (:func:`load_tables`), and the plots and tables several studies share (drift heatmaps, fit times, collinearity,
 validation traces, L-curves, online convergence, emcee posteriors). A study's own figures and its claim live in
@@ -103,7 +103,7 @@ class Builder:
         plt = _plt()
         found = [f"{study}/{name}: {p}" for p in readability_problems(fig)]
         for p in found:
-            print(f"study.figures: not fit for print: {p}", file=sys.stderr)
+            print(f"study figures: not fit for print: {p}", file=sys.stderr)
         self.problems += found
         d = self.out / study
         d.mkdir(parents=True, exist_ok=True)

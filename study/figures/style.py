@@ -1,4 +1,4 @@
-"""How every figure of ``python -m study.figures`` looks: one colour and marker per estimator and per sample
+"""How every figure of ``python -m study figures`` looks: one colour and marker per estimator and per sample
 structure (keyed by name, so a figure that shows a subset keeps each one's colour), fonts sized for print, log axes
 with enough labelled ticks, heatmap cell numbers only where they fit, the units of the identified parameters, and
 :func:`readability_problems`, the rules a figure is checked against (tests/test_figure_style.py).

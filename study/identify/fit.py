@@ -1,7 +1,7 @@
 """Identify a model from records: the regression or the output-error problem, the estimator, and the
 per-parameter and multicollinearity results of one run.
 
-``identify(model, structure, estimator_cfg, records)`` is what a study run (``study.pipeline``) and the model
+``identify(model, structure, estimator_cfg, records)`` is what a study run (``study.run.pipeline``) and the model
 doctor call; it returns an :class:`Identification` (estimates in the model's physical parameters, parameter
 rows for the results table, scalar metrics, artefact files). It fits the run's problem (:func:`fit_regression`:
 one :class:`~study.identify.estimators.problem.RegressionProblem` per equation; or :func:`fit_output_error`)

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import read_config
+from study.configuration.compose import read_config
 from ..sim import Vessel
 
 EQUATIONS = ("X", "Y", "N")

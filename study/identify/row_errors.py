@@ -4,7 +4,7 @@ truncation and the noise of the regressors (errors in variables).
 
 Why: the row-noise model (``study.identify.row_noise``) takes the regressors as exact and the structure's stencil
 as the derivative. Neither holds, and both bias the estimate by a posterior sd or more (measured on the KT
-Mariner with ``study.calibration``): euler's O(h) truncation 1.55 sd at 0.1 s (its 90 % intervals covered the
+Mariner with ``study.run.calibration``): euler's O(h) truncation 1.55 sd at 0.1 s (its 90 % intervals covered the
 truth 56 % of the time); at 1 s central's truncation 0.5 sd plus the regressors' noise 0.7 sd on the same side
 (70-78 %). A bias estimated from the records is the structure's, not sampling noise, so it is removed, not
 widened.
@@ -45,7 +45,7 @@ import numpy as np
 #: no small perturbation: measured on diff_center's split rows at 0.1 s (reliability 0.1-0.2), the correction took
 #: the KT's intervals from 44 % coverage to 0 %; there the run is left uncorrected and says it cannot be trusted
 RELIABILITY_MIN = 0.5
-#: the schema's measured channels (study.schema): white noise is added to these in a probe
+#: the schema's measured channels (study.records.schema): white noise is added to these in a probe
 PROBED_CHANNELS = ("u", "v", "r", "psi", "x0", "y0", "delta", "n")
 #: probes per run: their Monte Carlo error is measured from their spread and added to the covariance; it is
 #: small wherever the regressors are reliable (their noise a small part of their spread), 16 are enough there
@@ -75,7 +75,7 @@ class RowErrors:
 
 def channel_noise(df) -> dict:
     """{channel: white-noise sd} of one record's probed channels (``state_estimation.noise_std``)."""
-    from ..state_estimation import noise_std
+    from study.records.state_estimation import noise_std
 
     return {c: float(noise_std(df[c].to_numpy())) for c in PROBED_CHANNELS if c in df.columns}
 

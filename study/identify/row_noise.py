@@ -40,7 +40,7 @@ to first order (small noise); the regressors' noise enters ``e`` but is not mode
 whitening from undoing a differencing (diff_center's random split) it biases the estimate beyond any interval.
 Not modelled, because it is no sampling noise: a structure's truncation error (euler's O(h)), which a
 noise-free record has too; the posterior then covers the structure's noise-free limit, not the truth
-(``study.calibration`` measures both). Both the truncation and the errors in variables are estimated from the
+(``study.run.calibration`` measures both). Both the truncation and the errors in variables are estimated from the
 run's records and removed before and after the whitening by ``study.identify.row_errors`` (emcee's default). Numerical limit: the covariance of twice-differenced rows
 (diff_center) is ill-conditioned like n^4; at 41,700 rows it is no longer positive definite in doubles.
 """

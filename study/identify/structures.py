@@ -20,7 +20,7 @@ becomes the rows ``d(x, p) = sum_i theta_i value(f_i(nodes))``:
   window at each end is dropped (the end fits are one-sided). With ``smoothing.method: rts`` the states
   ``u, v, r`` and their derivatives come instead from an extended Kalman filter with a Rauch-Tung-Striebel
   smoother over the segment's positions, heading and measured ``u, v, r``
-  (``study.state_estimation``; options under ``smoothing.rts``); every other signal (rudder,
+  (``study.records.state_estimation``; options under ``smoothing.rts``); every other signal (rudder,
   propeller, wind...) is smoothed and differentiated by Savitzky-Golay as before, and the same rows are kept
   (the half window at each end dropped), so the two methods differ only in the states.
 - ``diff_center``: a base structure (``euler`` as in Song et al. (2025)), then its rows differenced,
@@ -319,7 +319,7 @@ class Structure:
         need = ("x0", "y0", "psi")
         if not all(c in seg.data for c in need):
             return None
-        from ..state_estimation import estimate_states
+        from study.records.state_estimation import estimate_states
 
         key = (len(seg.t), hash(np.asarray(seg.t, float).tobytes()),
                tuple(hash(np.asarray(seg.data[c], float).tobytes()) for c in need))
@@ -528,7 +528,7 @@ SMOOTHING_METHODS = ("savgol", "rts")
 def make_structure(cfg) -> Structure:
     """A :class:`Structure` from its config dict (or config name)."""
     if isinstance(cfg, str):
-        from ..config import read_config
+        from study.configuration.compose import read_config
 
         cfg = read_config("structure", cfg)
     cfg = dict(cfg)
@@ -553,7 +553,7 @@ def make_structure(cfg) -> Structure:
         if kind != "smoothed":
             raise ValueError(f"structure '{name}': smoothing.method rts belongs to the smoothed structure, not "
                              f"'{kind}'")
-        from ..state_estimation import resolve_options
+        from study.records.state_estimation import resolve_options
 
         resolve_options(sm.get("rts"))  # a misspelt option fails here, before any run
     return Structure(name=name, kind=kind, simulates=kind == "output_error", base=base,
@@ -565,7 +565,7 @@ def make_structure(cfg) -> Structure:
 
 
 def list_structures() -> list[str]:
-    from ..config import list_configs
+    from study.configuration.compose import list_configs
 
     return list_configs("structure")
 

@@ -4,7 +4,7 @@ holds the verdict and its limits, quoted below).
 
 Why: emcee's regression likelihood (``study.identify.row_noise``) models the sampling noise of the rows; a
 structure's truncation error is no sampling noise (a noise-free record has it too), so the posterior covers the
-structure's noise-free limit, not the truth. Measured on the KT Mariner (``study.calibration``): euler at 0.1 s is
+structure's noise-free limit, not the truth. Measured on the KT Mariner (``study.run.calibration``): euler at 0.1 s is
 biased by 1.55 posterior sd and its 90 % intervals cover the truth 56 % of the time; at 0.02 s 0.8 sd and 89 %.
 The same row errors are what emcee's default likelihood subtracts (``study.identify.row_errors``); then the bias
 estimated here is what was removed, and the verdict asks whether the removal can be trusted.

@@ -61,7 +61,7 @@ HETEROGENEITY_P = 1e-3
 BIAS_LIMIT_SD = 1.0
 #: where the likelihood removed the truncation (study.identify.row_errors): the most it may remove and still be
 #: trusted. Assumption (labelled): the estimate is within 2.5 % of the actual bias, so what is left stays below half a
-#: posterior sd. Measured on the KT Mariner (study.calibration, noise-free limit minus truth after the correction):
+#: posterior sd. Measured on the KT Mariner (study.run.calibration, noise-free limit minus truth after the correction):
 #: 0.01 sd left of 1.55 sd (euler, 0.1 s, 1 % noise), 0.1 of 4.8 (euler, 1 s), 0.02 of 8.5 (euler, 0.1 s, the
 #: standard training set with sensor noise, noise=low)
 CORRECTED_LIMIT_SD = 20.0

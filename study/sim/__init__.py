@@ -11,7 +11,7 @@ A vessel *kind* is a module with ``KIND``, ``PARAM_NAMES``, ``COEFF_SECTION``, `
 self-propulsion, and ``KINEMATIC_SWAY = False`` with ``aux_state_at_rest(P, delta)`` for a model without a
 sway velocity that carries an auxiliary state in the integrator's ``v_w`` slot instead (``nomoto``: see
 ``study.sim.core``). Kinds are listed in ``KINDS`` (``kinds.py``); adding one is one module plus one line there.
-Manoeuvres (``study.maneuvers``) and configs (``study.config``) come from the layer below: this package only
+Manoeuvres (``study.sim.maneuvers``) and configs (``study.configuration.compose``) come from the layer below: this package only
 simulates.
 """
 from __future__ import annotations
@@ -23,7 +23,7 @@ from functools import lru_cache
 import numpy as np
 import pandas as pd
 
-from ..config import read_config as _read_config  # private: configs are read from study.config
+from study.configuration.compose import read_config as _read_config
 from .core import ENV_NAMES, OUT_NAMES, make_integrator
 from .effects import apply_effects, env_vector, make_effect
 from .kinds import KINDS, get_kind  # noqa: F401 - KINDS re-exported (study.sim.KINDS)
@@ -165,9 +165,9 @@ def simulate(vessel, maneuver, effects=(), dt: float | None = None, sample_dt: f
     """Simulate one manoeuvre of one vessel; returns a clean schema DataFrame (no measurement noise).
 
     vessel : name, config dict or :class:`Vessel`; maneuver : name, config dict or
-    :class:`study.maneuvers.Maneuver`. ``sample_dt`` (default: ``dt``) must be a multiple of ``dt``.
+    :class:`study.sim.maneuvers.Maneuver`. ``sample_dt`` (default: ``dt``) must be a multiple of ``dt``.
     """
-    from .. import maneuvers
+    from study.sim import maneuvers
 
     if not isinstance(vessel, Vessel):
         vessel = load_vessel(vessel, effects)
@@ -198,7 +198,7 @@ def simulate_batch(vessel: Vessel, maneuver, P: np.ndarray, dt: float | None = N
     Returns ``(t, out)`` with ``out`` of shape (n, 9, B) in the order of ``study.sim.core.OUT_NAMES``; the
     propeller runs at ``vessel.n0`` for every member.
     """
-    from .. import maneuvers
+    from study.sim import maneuvers
 
     man = maneuvers.get_maneuver(maneuver)
     dt = default_dt(vessel) if dt is None else float(dt)
@@ -232,7 +232,7 @@ def replay(vessel: Vessel, time: np.ndarray, delta: np.ndarray, n: np.ndarray, s
     tt = np.arange(nsteps + 1) * dt + time[0]
     cmd = np.interp(tt, time, delta)
     nprop = np.interp(tt, time, n)
-    from ..maneuvers import open_loop_ctrl
+    from study.sim.maneuvers import open_loop_ctrl
 
     P = vessel.params if P is None else P
     state0 = _aux_at_rest(vessel, P, np.asarray(state0, float), cmd[0])

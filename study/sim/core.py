@@ -33,7 +33,7 @@ import numpy as np
 from numba import njit
 from numba.core.compiler import Compiler
 
-from ..maneuvers import CTRL_OPEN, CTRL_ZIGZAG  # the controller programmes' codes (study.maneuvers)
+from study.sim.maneuvers import CTRL_OPEN, CTRL_ZIGZAG
 from . import fastmath as fm
 
 # Environment/actuator parameters appended to each kind's parameters. Sources:
@@ -356,7 +356,7 @@ def _templates():
         P : (n_params, B) parameters
         cmd : (nsteps + 1,) rudder command (open loop, and before the controller's start time)
         nprop : (nsteps + 1,) propeller speed [rps]
-        ctrl : float array, controller programme (see study.maneuvers.encode)
+        ctrl : float array, controller programme (see study.sim.maneuvers.encode)
         out : (n_out, 9, B) output (OUT_NAMES), n_out = nsteps // save_every + 1; must not overlap the inputs
         Returns the number of output rows written.
         """
@@ -426,14 +426,13 @@ def _fingerprint(accel, n_kind_params: int, kinematic_sway: bool = True) -> int:
 
     numba's cache checks this file's time stamp and the function's own code only; functions reached through
     ``accel`` (the kind's module, ``fastmath``, shared helpers) are covered by hashing the sources of this
-    package, of ``study/maneuvers.py`` (the controller codes) and of the kind's module, plus the kind's tag and
+    package (the controller codes of ``maneuvers.py`` among them) and of the kind's module, plus the kind's tag and
     accel's code.
     """
     py = getattr(accel, "py_func", accel)
     h = hashlib.sha256(_kind_tag(accel, n_kind_params, kinematic_sway).encode())
     h.update(py.__code__.co_code)
     files = set(Path(__file__).resolve().parent.glob("*.py"))
-    files.add(Path(__file__).resolve().parents[1] / "maneuvers.py")  # the controller codes (CTRL_*)
     mod = sys.modules.get(py.__module__)
     if mod is not None and getattr(mod, "__file__", None):
         files.add(Path(mod.__file__).resolve())

@@ -1,7 +1,7 @@
 """The results folder: one atomic JSON record per run (the truth), each run's artefacts, claims that let one
 process compute a run while others wait or move on, and the two parquet tables rebuilt from the records
 (benchopt-style: the records are the truth, the tables a cache). It knows nothing of what a run computes:
-the executor (``study.executor``) hands it finished records.
+the executor (``study.run.executor``) hands it finished records.
 
 Layout under the results folder ``root`` (default ``results/``, relative to the working directory)::
 
@@ -338,7 +338,7 @@ class ResultStore:
     def restamp(self, current, unchanged) -> tuple[int, int]:
         """Re-label the code of finished records written under an older hashing of the same code: for each record
         whose ``code`` has no ``scheme``, ``current(config)`` gives the code dict today and ``unchanged(old, new)``
-        whether the record's code is that code (``study.fingerprint``: the files' bytes are the same); if so the
+        whether the record's code is that code (``study.store.fingerprint``: the files' bytes are the same); if so the
         record's ``code`` becomes today's, with the old fingerprint kept as ``code['restamped_from']``. Written
         atomically under the run's lock; nothing else in the record changes. Returns (restamped, left as they
         were: computed by other code, to be re-run)."""

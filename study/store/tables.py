@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from .. import fingerprint as code_fp
+from study.store import fingerprint as code_fp
 from .files import dumps
 from .records import PARAM_OPTIONAL, PARAM_TEXT, is_number
 
@@ -178,7 +178,7 @@ def read_table(path) -> pd.DataFrame:
         return pd.read_parquet(io.BytesIO(data))
     except Exception as e:  # pyarrow's own error types name no file
         raise TableError(f"{path}: not a readable parquet table ({type(e).__name__}: {e}); expected a table the "
-                         "store wrote: `python -m study.results rebuild` remakes it from the records") from e
+                         "store wrote: `python -m study results rebuild` remakes it from the records") from e
 
 
 class TableError(ValueError):

@@ -5,7 +5,7 @@ rudder gives a yaw moment N = c n^2, c [N m s^2] unknown. It enters the regressi
 (its force per unit c is n^2 in the yaw equation); in a replay the integrator takes a constant body force, so
 the record's mean n^2 is used (exact for a record run at constant propeller speed, labelled as such).
 
-Use: ``python -m study.diagnose ... effect_path=docs/examples/effects`` with this folder on ``PYTHONPATH``.
+Use: ``python -m study diagnose ... effect_path=docs/examples/effects`` with this folder on ``PYTHONPATH``.
 """
 import numpy as np
 

@@ -3,7 +3,7 @@ likelihood's 90 % intervals calibrated, per dataset and per coefficient, and doe
 they are not (no noise, coarse sampling, coloured noise, a model missing a term)?
 
 ``build`` writes the study's figures and tables into ``paper_figs/emcee_calibration/`` and appends its claims to
-``claims``; ``python -m study.figures`` finds this module by the study's name
+``claims``; ``python -m study figures`` finds this module by the study's name
 (``conf/experiment/emcee_calibration.yaml``). Coverage verdicts as in emcee_kt, the dataset as the unit
 (:func:`study.figures.verdicts.coverage_over_datasets`)."""
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """emcee on Nomoto models: are the 90 % intervals calibrated, per likelihood, structure, noise and sampling interval?
 
 ``build`` writes the study's figures and tables into ``paper_figs/emcee_kt/`` and appends its claims to ``claims``;
-``python -m study.figures`` finds this module by the study's name (``conf/experiment/emcee_kt.yaml``).
+``python -m study figures`` finds this module by the study's name (``conf/experiment/emcee_kt.yaml``).
 
 How a calibration verdict is decided: over the datasets (seeds) of one set-up, each coefficient's 90 % interval
 either holds the truth or not. The coverage (the share of intervals that hold it) comes with a 95 % bootstrap

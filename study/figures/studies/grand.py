@@ -2,7 +2,7 @@
 drift grow with noise?
 
 ``build`` writes the study's figures and tables into ``paper_figs/grand/`` and appends its claim to ``claims``;
-``python -m study.figures`` finds this module by the study's name (``conf/experiment/grand.yaml``).
+``python -m study figures`` finds this module by the study's name (``conf/experiment/grand.yaml``).
 
 Nothing is pooled across models: every figure has one row of panels per vessel and model (each with its own
 coefficient count), and the claim is decided per model with the dataset as the unit (:mod:`study.figures.verdicts`),

@@ -2,7 +2,7 @@
 forward differences, and Lasso's term selection.
 
 ``build`` writes the study's figures and tables into ``paper_figs/seed000_svr_mmg/`` and appends its claim (if any) to
-``claims``; ``python -m study.figures`` finds this module by the study's name (``conf/experiment/seed000_svr_mmg.yaml``)."""
+``claims``; ``python -m study figures`` finds this module by the study's name (``conf/experiment/seed000_svr_mmg.yaml``)."""
 from __future__ import annotations
 
 import pandas as pd

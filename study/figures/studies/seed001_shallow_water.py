@@ -2,7 +2,7 @@
 squares, LS-SVM and nu-SVR.
 
 ``build`` writes the study's figures and tables into ``paper_figs/seed001_shallow_water/`` and appends its claim (if any) to
-``claims``; ``python -m study.figures`` finds this module by the study's name (``conf/experiment/seed001_shallow_water.yaml``)."""
+``claims``; ``python -m study figures`` finds this module by the study's name (``conf/experiment/seed001_shallow_water.yaml``)."""
 from __future__ import annotations
 
 import numpy as np

@@ -3,7 +3,7 @@ as the paper intends: hull models with many collinear columns (the Abkowitz Mari
 waterjet USV's full model), noisy records.
 
 ``build`` writes the study's figures and tables into ``paper_figs/seed001_truncation/`` and appends its claim to
-``claims``; ``python -m study.figures`` finds this module by the study's name
+``claims``; ``python -m study figures`` finds this module by the study's name
 (``conf/experiment/seed001_truncation.yaml``)."""
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 settle.
 
 ``build`` writes the study's figures and tables into ``paper_figs/seed003_online_auv/`` and appends its claim (if any) to
-``claims``; ``python -m study.figures`` finds this module by the study's name (``conf/experiment/seed003_online_auv.yaml``)."""
+``claims``; ``python -m study figures`` finds this module by the study's name (``conf/experiment/seed003_online_auv.yaml``)."""
 from __future__ import annotations
 
 import numpy as np

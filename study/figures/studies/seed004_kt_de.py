@@ -2,7 +2,7 @@
 against central differences of the heading.
 
 ``build`` writes the study's figures and tables into ``paper_figs/seed004_kt_de/`` and appends its claim (if any) to
-``claims``; ``python -m study.figures`` finds this module by the study's name (``conf/experiment/seed004_kt_de.yaml``)."""
+``claims``; ``python -m study figures`` finds this module by the study's name (``conf/experiment/seed004_kt_de.yaml``)."""
 from __future__ import annotations
 
 import pandas as pd

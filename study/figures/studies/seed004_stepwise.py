@@ -3,7 +3,7 @@ identification it replaces (Zou et al.: K from a small-rudder turn, alpha from a
 large-rudder zigzag), by differential evolution on the heading's output error, on the same records.
 
 ``build`` writes the study's figures and tables into ``paper_figs/seed004_stepwise/`` and appends its claim to
-``claims``; ``python -m study.figures`` finds this module by the study's name (``conf/experiment/seed004_stepwise.yaml``)."""
+``claims``; ``python -m study figures`` finds this module by the study's name (``conf/experiment/seed004_stepwise.yaml``)."""
 from __future__ import annotations
 
 import pandas as pd

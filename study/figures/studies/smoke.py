@@ -1,7 +1,7 @@
 """The CI study: one of every figure kind the table allows, no claims (it is too small to test any).
 
 ``build`` writes the study's figures and tables into ``paper_figs/smoke/`` and appends its claim (if any) to
-``claims``; ``python -m study.figures`` finds this module by the study's name (``conf/experiment/smoke.yaml``)."""
+``claims``; ``python -m study figures`` finds this module by the study's name (``conf/experiment/smoke.yaml``)."""
 from __future__ import annotations
 
 import json

@@ -4,10 +4,10 @@ identification with effects (``study.identify.with_effects``) adds to a model, a
 An effect config names its class (``_target_``), its nonlinear parameters and options; the contract is in
 :mod:`.base`. Adding an effect is one class plus one YAML, like an estimator. A user adds their own without
 touching the package: a YAML in a folder of their own, named by ``effect_path=<dir>`` (``python -m
-study.diagnose``) or the environment variable ``STUDY_EFFECT_PATH`` (folders separated by ``:``), whose
+study diagnose``) or the environment variable ``STUDY_EFFECT_PATH`` (folders separated by ``:``), whose
 ``_target_`` is a class importable from their ``PYTHONPATH`` and defined in a module of one of those folders (an
 effect folder is code, and must be trusted: a ``_target_`` elsewhere is refused before anything is imported,
-``study.config.check_target``); or a config dict given directly as a candidate.
+``study.configuration.compose.check_target``); or a config dict given directly as a candidate.
 """
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ __all__ = ["Effect", "Param", "RecordInfo", "effect_dirs", "list_effects", "make
 def effect_dirs(extra=()) -> list:
     """The folders effect YAMLs are read from: the package's ``conf/effect``, then ``STUDY_EFFECT_PATH``, then
     ``extra`` (a later folder's YAML of the same name replaces an earlier one)."""
-    from ...config import CONF_DIR
+    from study.configuration.compose import CONF_DIR
 
     dirs = [CONF_DIR / "effect"]
     env = os.environ.get("STUDY_EFFECT_PATH", "")
@@ -75,7 +75,7 @@ def make_effect(cfg, extra=()) -> Effect:
     target = cfg.get("_target_")
     if not target:
         raise ValueError(f"{where}: effect '{cfg.get('name')}' has no _target_ (the effect's class path)")
-    from ...config import check_target
+    from study.configuration.compose import check_target
 
     # the trusted-code boundary, before anything is imported: the package's effects, or a module that lies in
     # one of the effect folders the user named (a folder of effects is code and must be trusted)

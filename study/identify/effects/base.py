@@ -81,7 +81,7 @@ class Effect:
     """Base class: a candidate effect with nothing to estimate. Subclasses override the hooks they need.
 
     Class attributes (shown in the report's catalogue): ``physics``, ``enters``, ``source``; and where the effect
-    can be (``study.facility``): ``needs``, what must exist where the records were measured (``"wind"``,
+    can be (``study.records.facility``): ``needs``, what must exist where the records were measured (``"wind"``,
     ``"current"``: no wind candidate indoors, no current in still water), and ``setup_effect``, True when the
     effect belongs to the test set-up rather than to the ship (a rudder zero offset, a yaw bias): it is then left
     out of predictions for another facility or scale unless the user keeps it. An effect's YAML may set both

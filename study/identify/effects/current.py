@@ -17,7 +17,7 @@ class Current(Effect):
     physics = "uniform, irrotational current: the hull feels water-relative velocities, the track drifts"
     enters = "u, v of the record minus the current in body axes (exact in relative velocities)"
     source = "Fossen (2011) Handbook of Marine Craft Hydrodynamics and Motion Control, Sec. 10.3"
-    needs = ("current",)  # no candidate in still water (study.facility)
+    needs = ("current",)  # no candidate in still water (study.records.facility)
 
     def transform(self, problem, t, data, values, vessel, info):
         n, e, psi = values["current_north"], values["current_east"], data["psi"]

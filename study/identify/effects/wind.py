@@ -22,7 +22,7 @@ class Wind(Effect):
     physics = "steady true wind on the superstructure, C_X = -c_x cos g, C_Y = c_y sin g, C_N = c_n sin 2g"
     enters = "a known external force in the equations of motion (the integrator's own wind function)"
     source = "Fossen (2011) Sec. 8.1 (coefficients c_x 0.7, c_y 0.8, c_n 0.1; vessel windage areas)"
-    needs = ("wind",)  # no candidate indoors (study.facility)
+    needs = ("wind",)  # no candidate indoors (study.records.facility)
 
     def applies(self, problem):
         if not problem.vessel_cfg.get("windage"):

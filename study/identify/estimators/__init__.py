@@ -21,7 +21,7 @@ __all__ = ["Estimator", "LeastSquares", "as_arrays", "estimator_class", "list_es
 
 def list_estimators() -> list[str]:
     """Names of the estimator configs (``conf/estimator/*.yaml``)."""
-    from ...config import list_configs
+    from study.configuration.compose import list_configs
 
     return list_configs("estimator")
 
@@ -31,7 +31,7 @@ def estimator_class(cfg: dict):
     target = cfg.get("_target_")
     if not target:
         raise ValueError(f"estimator config '{cfg.get('name')}' has no _target_ (the estimator's class path)")
-    from ...config import check_target
+    from study.configuration.compose import check_target
 
     check_target(target, "estimator._target_")  # the trusted-code boundary: checked before anything is imported
     try:
@@ -46,7 +46,7 @@ def estimator_class(cfg: dict):
 def make_estimator(cfg, **overrides) -> Estimator:
     """An estimator from its config (dict or config name), hyper-parameters from ``params`` + overrides."""
     if isinstance(cfg, str):
-        from ...config import read_config
+        from study.configuration.compose import read_config
 
         cfg = read_config("estimator", cfg)
     params = dict(cfg.get("params") or {})

@@ -1,6 +1,6 @@
 """Identify a model with a set of effects, and replay it through records: the identification the model doctor
-(``study.doctor``) ranks effects with and a study run with ``model.effects`` (``study.pipeline``,
-``study.records_run``) uses.
+(``study.doctor``) ranks effects with and a study run with ``model.effects`` (``study.run.pipeline``,
+``study.run.records_run``) uses.
 
 The model is a vessel kind's force model: the vessel config holds the coefficients as the user knows them
 (captive tests, CFD, a previous identification); the model config may free some of them (``equations``, each

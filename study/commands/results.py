@@ -1,0 +1,142 @@
+"""``python -m study results {rebuild,show}``: the results folder from the command line (the store itself is
+``study.store``; its folder and columns are described in ``results/README.md``).
+
+``rebuild`` remakes ``runs.parquet`` and ``params.parquet`` from the records; ``show`` counts the runs by status
+and lists the last ten, without writing anything.
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+
+import pandas as pd
+from filelock import Timeout
+
+from study.store import STATUSES, ResultsFolderError, ResultStore
+
+
+# ------------------------------------------------------------------------------------------------------- CLI
+
+def _counts(runs: pd.DataFrame) -> dict:
+    return {s: int((runs["status"] == s).sum()) if len(runs) else 0 for s in STATUSES}
+
+
+def _say(store: ResultStore, stream=None) -> None:
+    for line in store.report.lines():
+        print(f"study results: {line}", file=stream or sys.stderr)
+
+
+def _posterior(store: ResultStore, run_id: str, out: str | None) -> int:
+    """An emcee run's chains as one ArviZ InferenceData: r-hat and ESS printed, the netCDF file written."""
+    from pathlib import Path
+
+    from study.identify.posterior import diagnostics, inference_data, run_chains
+
+    chains = run_chains(store.artefact_dir(run_id))
+    if not chains:
+        print(f"study results: error: {run_id}: no chain.npz in {store.artefact_dir(run_id)}; expected the run id of "
+              "an emcee run of this results folder", file=sys.stderr)
+        return 2
+    if out is not None and Path(out).suffix != ".nc":
+        print(f"study results: error: --out {out}: expected a netCDF file name ending in .nc", file=sys.stderr)
+        return 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)  # ArviZ announces its coming refactor on import
+        idata = inference_data(chains, {"run_id": run_id, "results": str(store.root.resolve())})
+        table = diagnostics(idata)
+    print(f"{run_id}: {idata.posterior.sizes['chain']} walkers x {idata.posterior.sizes['draw']} saved draws, "
+          f"{len(table)} coefficients (ArviZ; walkers as chains: r-hat says whether the ensemble mixed)")
+    print(table.to_string(float_format=lambda x: f"{x:.4g}"))
+    if out is not None:
+        idata.to_netcdf(out)
+        print(f"written {Path(out).resolve()}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m study results {rebuild,show,posterior} [--root results]``; exit status 1 on an error."""
+    ap = argparse.ArgumentParser(prog="python -m study results", description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    for name, help_ in (("rebuild", "rebuild runs.parquet and params.parquet from the records"),
+                        ("show", "counts by status and the last 10 runs"),
+                        ("posterior", "an emcee run's posterior: ArviZ's r-hat and ESS, and a netCDF file"),
+                        ("restamp", "give records fingerprinted on their files' bytes the executed-source "
+                                    "fingerprint, where the code is unchanged (then rebuild)")):
+        p = sub.add_parser(name, help=help_)
+        p.add_argument("--root", "--results", dest="root", default=None,
+                       help="results folder (default $STUDY_RESULTS_DIR or results/)")
+        if name == "rebuild":
+            p.add_argument("--allow-empty", action="store_true",
+                           help="write empty tables even over non-empty ones (no well-formed record found)")
+            p.add_argument("--strict", action="store_true", help="exit 1 when a record was skipped")
+        if name == "posterior":
+            p.add_argument("run_id", help="the run (runs.parquet's run_id)")
+            p.add_argument("--out", default=None, help="write the InferenceData to this netCDF file (.nc)")
+    args = ap.parse_args(argv)
+    store = ResultStore(args.root)
+    if not store.root.is_dir():  # nothing to show or rebuild: refused, and no folder is made
+        print(f"study results: error: --root {args.root or store.root}: no such folder {store.root.resolve()}; "
+              "expected a results folder (one a study wrote)", file=sys.stderr)
+        return 2
+    if args.cmd == "posterior":
+        return _posterior(store, args.run_id, args.out)
+    if args.cmd == "restamp":
+        from study.store import fingerprint
+
+        done, left = store.restamp(fingerprint.code_fingerprint,
+                                   lambda old, new: not fingerprint.changed_components(old, new))
+        print(f"{done} record(s) restamped; {left} computed by code that has changed since (re-run them)")
+        runs, _ = store.collect(allow_empty=True)
+        print(f"runs: {store.runs_path.resolve()} ({len(runs)} runs)")
+        return 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # the same problems are printed from the report below
+        try:
+            if args.cmd == "rebuild":
+                runs, params = store.collect(allow_empty=args.allow_empty)
+                _say(store)
+                c = _counts(runs)
+                skipped = len(store.report.skipped)
+                print(f"{len(runs)} runs ({c['ok']} ok, {c['failed']} failed, {c['skipped']} skipped), "
+                      f"{len(params)} parameter rows" + (f"; {skipped} record(s) left out" if skipped else ""))
+                print(f"runs:   {store.runs_path.resolve()}")
+                print(f"params: {store.params_path.resolve()}")
+                return 1 if args.strict and skipped else 0
+            runs, _ = store.tables()  # fresh from the records, writes nothing
+        except (ResultsFolderError, OSError, Timeout) as e:
+            print(f"study results: error: {e}", file=sys.stderr)
+            return 1
+    _say(store)
+    for p, why, removable in store.leftovers():
+        print(f"study results: {'crash leftover' if removable else 'temp file'} {p} ({why})"
+              + ("; the next rebuild removes it" if removable else ""), file=sys.stderr)
+    c = _counts(runs)
+    skipped = len(store.report.skipped)
+    print(f"{store.root.resolve()}: {len(runs)} runs ({c['ok']} ok, {c['failed']} failed, {c['skipped']} skipped)"
+          + (f"; {skipped} record(s) left out" if skipped else "")
+          + (f"; {store.report.stale} computed by older code" if store.report.stale else ""))
+    if len(runs):
+        cols = [col for col in ("run_id", "replicate", "status", "finished", "wall_time", "code_current",
+                                "cfg_vessel.name", "cfg_model.name", "cfg_structure.name", "cfg_estimator.name",
+                                "cfg_noise.name", "m_drift_median") if col in runs]
+        last = runs.sort_values("finished", kind="stable").tail(10)[cols].copy()
+        last["finished"] = last["finished"].dt.strftime("%Y-%m-%d %H:%M:%S")
+        last["wall_time"] = last["wall_time"].round(2)
+        if "m_drift_median" in last:  # the median relative error of the run's coefficients, in per cent
+            last["m_drift_median"] = (100 * last["m_drift_median"].astype(float)).round(1)
+            last = last.rename(columns={"m_drift_median": "drift_%"})
+        errs = runs.loc[last.index, "error"].map(
+            lambda e: str(e).strip().splitlines()[-1][:60] if isinstance(e, str) and e.strip() else "")
+        if errs.any():
+            last["error"] = errs
+        print("last runs:")
+        print(last.to_string(index=False))
+    return 0
+
+
+def command() -> None:
+    """Run the command on ``sys.argv`` and exit with its status."""
+    from study.configuration.cli import run
+
+    run(main, "study results")

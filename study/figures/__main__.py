@@ -1,4 +1,0 @@
-from ..cli import run
-from . import main
-
-run(main, "study.figures")

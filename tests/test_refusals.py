@@ -1,5 +1,5 @@
 """Refused means nothing written, nothing accepted silently, one clear line before any work, a trusted-code boundary
-(study/cli.py run_hydra's precheck, study/settings.py, study/config.py check_target, the store's record checks).
+(study/configuration/cli.py run_hydra's precheck, study/run/settings.py, study/configuration/compose.py check_target, the store's record checks).
 
 Each command-line refusal runs in an empty launch folder, without overriding Hydra's output folder, and the folder
 must still be empty afterwards; the property tests generate malformed records and settings and find neither a
@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from study import cli
-from study.config import UntrustedCodeError, check_target, check_targets, compose
-from study.settings import ENUMS, check_diagnose, check_run, check_simulate
+from study.configuration import cli
+from study.configuration.compose import UntrustedCodeError, check_target, check_targets, compose
+from study.run.settings import ENUMS, check_diagnose, check_run, check_simulate
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLES = REPO / "docs" / "examples" / "effects"
@@ -30,7 +30,7 @@ def _cmd(module, *args, cwd, env_extra=None):
     env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "PYTHONPATH": str(REPO), **(env_extra or {})}
     for k in ("STUDY_VERBOSE", "HYDRA_FULL_ERROR", "STUDY_RESULTS_DIR", "STUDY_EFFECT_PATH"):
         env.pop(k, None)
-    return subprocess.run([sys.executable, "-m", module, *args], cwd=cwd, env=env, capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", *module.split(), *args], cwd=cwd, env=env, capture_output=True, text=True,
                           timeout=600)
 
 
@@ -41,7 +41,7 @@ def _tree(folder: Path) -> list:
 @pytest.fixture(scope="module")
 def records(tmp_path_factory):
     """Two simulated model-scale KVLCC2 records, and a copy of one with a single wild sample (u = 1e300)."""
-    from study.schema import Record, write_record
+    from study.records.schema import Record, write_record
     from study.sim import load_vessel, simulate
 
     d = tmp_path_factory.mktemp("records")
@@ -82,21 +82,21 @@ REFUSALS = [
     ("study", ["-m", "experiment=tiny", "sim.dt=0.1,-1"], "sim.dt=-1"),
     ("study", ["-m", "experiment=tiny", "seed=1,2", "hydra/launcher=local", "+hydra.launcher._target_=os.makedirs"],
      "os.makedirs"),
-    ("study.simulate", ["out=/proc/x.csv"], "folder /proc"),
-    ("study.simulate", ["out=a.csv", "rudder_log=bogus"], "rudder_log='bogus'"),
-    ("study.simulate", ["out=a.csv", "sim.dt=1000"], "sim.dt=1000"),
-    ("study.simulate", ["out=a.csv", "overwrite=yes please"], "overwrite='yes please'"),
-    ("study.diagnose", ["train={rec}", "checks=eror"], "checks='eror'"),
-    ("study.diagnose", ["train={rec}", "candidates=[nosuch]"], "'nosuch'"),
-    ("study.diagnose", ["train={rec}", "effect_path=/no/such/folder"], "effect_path=/no/such/folder"),
-    ("study.diagnose", ["train={rec}", "out=/proc/report"], "out=/proc/report"),
-    ("study.diagnose", ["train={rec}", "state_options.process=fast"], "state_options.process='fast'"),
-    ("study.diagnose", ["train={rec}/wild", "vessel=kvlcc2_l7", "checks=off", "out=rep"], "column 'u', row 101"),
-    ("study.diagnose", ["train={rec}/zigzag_10_10.csv", "vessel=kvlcc2_l7", "out=rep"], "at least two records"),
-    ("study.results", ["show", "--root", "missing"], "--root missing"),
-    ("study.results", ["rebuild", "--root", "missing"], "--root missing"),
-    ("study.results", ["shwo"], "invalid choice"),
-    ("study.figures", ["--results", "missing"], "--results missing"),
+    ("study simulate", ["out=/proc/x.csv"], "folder /proc"),
+    ("study simulate", ["out=a.csv", "rudder_log=bogus"], "rudder_log='bogus'"),
+    ("study simulate", ["out=a.csv", "sim.dt=1000"], "sim.dt=1000"),
+    ("study simulate", ["out=a.csv", "overwrite=yes please"], "overwrite='yes please'"),
+    ("study diagnose", ["train={rec}", "checks=eror"], "checks='eror'"),
+    ("study diagnose", ["train={rec}", "candidates=[nosuch]"], "'nosuch'"),
+    ("study diagnose", ["train={rec}", "effect_path=/no/such/folder"], "effect_path=/no/such/folder"),
+    ("study diagnose", ["train={rec}", "out=/proc/report"], "out=/proc/report"),
+    ("study diagnose", ["train={rec}", "state_options.process=fast"], "state_options.process='fast'"),
+    ("study diagnose", ["train={rec}/wild", "vessel=kvlcc2_l7", "checks=off", "out=rep"], "column 'u', row 101"),
+    ("study diagnose", ["train={rec}/zigzag_10_10.csv", "vessel=kvlcc2_l7", "out=rep"], "at least two records"),
+    ("study results", ["show", "--root", "missing"], "--root missing"),
+    ("study results", ["rebuild", "--root", "missing"], "--root missing"),
+    ("study results", ["shwo"], "invalid choice"),
+    ("study figures", ["--results", "missing"], "--results missing"),
 ]
 
 
@@ -138,8 +138,8 @@ def test_a_refusal_inside_the_task_removes_the_folder_hydra_made(tmp_path, monke
 
 
 def test_argparse_errors_are_one_line_with_status_2(tmp_path):
-    p = _cmd("study.results", "rebuild", "--bogus", cwd=tmp_path)
-    assert p.returncode == 2 and p.stderr.count("\n") == 1 and p.stderr.startswith("study.results: error: ")
+    p = _cmd("study results", "rebuild", "--bogus", cwd=tmp_path)
+    assert p.returncode == 2 and p.stderr.count("\n") == 1 and p.stderr.startswith("study results: error: ")
     assert "usage:" not in p.stderr
 
 
@@ -194,21 +194,21 @@ def test_an_effect_whose_target_lies_outside_its_folder_is_refused_before_import
 # ------------------------------------------------------------------------------------- enumerated settings
 
 def test_the_enumerations_are_the_codes_own():
-    from study.measure import NOISE_KINDS
-    from study.records_run import CHECK_MODES
-    from study.executor import RESUME_MODES
-    from study.schema import STATES
+    from study.records.measure import NOISE_KINDS
+    from study.run.records_run import CHECK_MODES
+    from study.run.executor import RESUME_MODES
+    from study.records.schema import STATES
     from study.sim.effects import LINEAR_FORMULAS
 
     assert ENUMS["study"]["resume"][0] == RESUME_MODES
-    assert ENUMS["study"]["checks"][0] == CHECK_MODES == ENUMS["study.diagnose"]["checks"][0]
-    assert ENUMS["study"]["states"][0] == STATES == ENUMS["study.diagnose"]["states"][0]
+    assert ENUMS["study"]["checks"][0] == CHECK_MODES == ENUMS["study diagnose"]["checks"][0]
+    assert ENUMS["study"]["states"][0] == STATES == ENUMS["study diagnose"]["states"][0]
     assert ENUMS["study"]["noise.kind"][0] == NOISE_KINDS
     assert set(ENUMS["study"]["depth.formula"][0]) == set(LINEAR_FORMULAS)
 
 
-_COMMANDS = {"study": ("config", [], check_run), "study.simulate": ("simulate", ["out=x.csv"], check_simulate),
-             "study.diagnose": ("diagnose", ["train=x.csv", "out=rep"], check_diagnose)}
+_COMMANDS = {"study": ("config", [], check_run), "study simulate": ("simulate", ["out=x.csv"], check_simulate),
+             "study diagnose": ("diagnose", ["train=x.csv", "out=rep"], check_diagnose)}
 
 
 @pytest.mark.parametrize("command", sorted(ENUMS))
@@ -232,11 +232,11 @@ def test_every_enumerated_setting_is_refused_outside_its_values(command, tmp_pat
 # ------------------------------------------------------------------------------------ records and the store
 
 def test_a_value_outside_the_physical_envelope_names_file_column_and_row():
-    from study.schema import Record
+    from study.records.schema import Record
     from study.sim import simulate
-    from study.vessel_checks import RecordCheckError, check_envelope
+    from study.records.vessel_checks import RecordCheckError, check_envelope
 
-    from study.config import read_config
+    from study.configuration.compose import read_config
 
     vessel = read_config("vessel", "kvlcc2_l7")
     df = simulate("kvlcc2_l7", "zigzag_10_10", duration=30.0)
@@ -250,7 +250,7 @@ def test_a_value_outside_the_physical_envelope_names_file_column_and_row():
 
 def test_an_extra_text_column_is_kept_and_ignored_by_identification():
     from study.identify.structures import segments
-    from study.schema import Record
+    from study.records.schema import Record
     from study.sim import simulate
 
     df = simulate("kvlcc2_l7", "zigzag_10_10", duration=10.0).assign(note="bar")
@@ -291,8 +291,23 @@ def test_a_metric_of_the_wrong_type_leaves_its_record_out_by_name(tmp_path):
     assert any(str(path) in str(x.message) for x in w)
 
 
+def test_a_number_among_text_metrics_leaves_its_record_out_not_the_others(tmp_path):
+    """The kind most records hold decides: a number where the others hold text is the stray one."""
+    from study.store import ResultStore
+
+    _write_records(tmp_path, [_record(0, {"rmse": 0.1, "note": "a"}), _record(1, {"rmse": 0.2, "note": "b"}),
+                              _record(2, {"rmse": 0.3, "note": 0})])
+    store = ResultStore(tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        runs, _ = store.collect()
+    assert sorted(runs["m_note"]) == ["a", "b"]
+    (path, why), = store.report.skipped
+    assert path.name == f"{_record(2, {})['run_id']}.json" and "metric 'note' is a number (0)" in why
+
+
 def test_progress_counts_a_record_with_a_status_of_another_type(tmp_path):
-    from study.app import _folder_counts
+    from study.commands.app import _folder_counts
 
     _write_records(tmp_path, [_record(0, {}), {**_record(1, {}), "status": 5}, [1, 2]])
     counts = _folder_counts(tmp_path)

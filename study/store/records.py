@@ -229,10 +229,10 @@ def _kind(v: Any) -> str | None:
 
 def mistyped_records(items: list) -> dict:
     """``{file: reason}`` of the records, among ``items`` (``(file, record)`` pairs, each record well-formed on
-    its own), whose metric has the wrong type: text (or a flag) where the other records hold a number. One such
-    value would turn the metric's column into text for every row of ``runs.parquet``; the record is left out
-    instead, by name, as a malformed one is. A metric only some records have, or of one kind in all, is kept
-    (some metrics are text: ``prior_source``, notes, estimator diagnostics)."""
+    its own), whose metric has the wrong type: a kind other than the one most records hold (a number on a tie), such as
+    text where the others hold a number. One such value would retype the metric's column for every row of
+    ``runs.parquet``; the record is left out instead, by name, as a malformed one is. A metric only some records
+    have, or of one kind in all, is kept (some metrics are text: ``prior_source``, notes, estimator diagnostics)."""
     kinds: dict = {}
     for _, rec in items:
         for k, v in (rec.get("metrics") or {}).items():
@@ -240,7 +240,8 @@ def mistyped_records(items: list) -> dict:
             if kd is not None:
                 kinds.setdefault(k, {}).setdefault(kd, 0)
                 kinds[k][kd] += 1
-    expected = {k: "a number" for k, c in kinds.items() if "a number" in c and len(c) > 1}
+    # the kind most records hold (a number on a tie): one stray value, of any kind, cannot retype the column
+    expected = {k: max(c, key=lambda kd: (c[kd], kd == "a number")) for k, c in kinds.items() if len(c) > 1}
     out: dict = {}
     for path, rec in items:
         for k, v in (rec.get("metrics") or {}).items():

@@ -1,7 +1,7 @@
 """Benchmark of the regression estimators (conf/estimator/*.yaml) on synthetic manoeuvre-like regressors.
 
 Workload: 16,800 samples (seed 000's training set: 21,000 samples at 0.1 s, 80 %) x 5 and x 11 columns, built
-like the test data (``tests/test_estimators.py``): smooth correlated signals, columns scaled over 1e-3..1e2,
+like the test data (``tests/identify/test_estimators.py``): smooth correlated signals, columns scaled over 1e-3..1e2,
 one pair correlated 0.99; y = X theta + 2 % of std(y) white noise. Default hyper-parameters (the YAMLs).
 
 Reported per estimator and column count:

@@ -1,7 +1,14 @@
-"""Shared fixtures: a headless Chromium (Debian's chromium + chromium-driver, driven by Selenium)."""
+"""Shared fixtures: a headless Chromium (Debian's chromium + chromium-driver, driven by Selenium).
+
+The tests mirror the package (``tests/<package>/test_*.py``); the helpers several packages' tests share
+(``doctor_cases``, ``simd_asm``) stay here, importable from every folder."""
 import os
+import sys
+from pathlib import Path
 
 import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 CHROMIUM = "/usr/bin/chromium"
 CHROMEDRIVER = "/usr/bin/chromedriver"

@@ -64,7 +64,7 @@ def test_laplace_proposal_is_exact_metropolis_hastings():
 
 
 def test_laplace_moves_need_a_gaussian_approximation():
-    """'laplace' on regression rows proposes from the closed-form posterior (tests/test_emcee_regression_proposals.py);
+    """'laplace' on regression rows proposes from the closed-form posterior (tests/identify/test_emcee_regression_proposals.py);
     with no residual degree of freedom the iid likelihood has none: a clear error."""
     X = np.random.default_rng(0).standard_normal((2, 2))
     with pytest.raises(ValueError, match="laplace"):

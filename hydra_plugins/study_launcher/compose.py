@@ -22,7 +22,7 @@ once instead of every time, both exact:
   state before them is a function of the group overrides alone. Anything else -- an override of ``hydra.*``, a
   sweep-syntax value, a job without value overrides -- is composed by ``load_sweep_config`` itself.
 
-Hydra internals are used (private but pinned: hydra-core 1.3), and ``tests/test_launcher.py`` checks node by node
+Hydra internals are used (private but pinned: hydra-core 1.3), and ``tests/plugins/test_launcher.py`` checks node by node
 (values, node types, flags, metadata) that the result equals Hydra's own composition, on a sample of grand's and
 seed001's jobs in the default test run and on every job of both with ``-m slow``.
 """

@@ -116,7 +116,7 @@ def compose(config_name: str, overrides=(), hydra: bool = False) -> dict:
 
 def simulated_studies() -> set[str]:
     """The named simulated studies: the ``study`` each experiment (``conf/experiment/<name>.yaml``) sets. Each has
-    its figures and claim in ``study/figures/studies/<name>.py`` (``tests/test_figures.py`` checks the two sets
+    its figures and claim in ``study/figures/studies/<name>.py`` (``tests/figures/test_figures.py`` checks the two sets
     are the same)."""
     out = set()
     for name in list_configs("experiment"):

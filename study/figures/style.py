@@ -1,7 +1,7 @@
 """How every figure of ``python -m study figures`` looks: one colour and marker per estimator and per sample
 structure (keyed by name, so a figure that shows a subset keeps each one's colour), fonts sized for print, log axes
 with enough labelled ticks, heatmap cell numbers only where they fit, the units of the identified parameters, and
-:func:`readability_problems`, the rules a figure is checked against (tests/test_figure_style.py).
+:func:`readability_problems`, the rules a figure is checked against (tests/figures/test_figure_style.py).
 
 Print size: the figures are drawn at most :data:`PRINT_WIDTH_IN` wide, Elsevier's double-column width (190 mm;
 Elsevier, "Artwork sizing", https://www.elsevier.com/about/policies-and-standards/author/artwork-and-media-instructions/artwork-sizing),
@@ -34,7 +34,7 @@ OKABE_BLUE = "#0072B2"
 #: Okabe & Ito's set and Tol's muted and vibrant schemes, chosen so that any two are at least 20 apart in CIEDE2000
 #: (G. Sharma, W. Wu, E. N. Dalal, "The CIEDE2000 color-difference formula", Color Res. Appl. 30, 2005) and every
 #: one has a CIE lightness L* of 30-72: no near-black line beside the black truth, no pale line on white, and no
-#: two dark purples (tested: tests/test_figure_style.py). Each estimator also has its own marker, so two estimators
+#: two dark purples (tested: tests/figures/test_figure_style.py). Each estimator also has its own marker, so two estimators
 #: differ even in greyscale. A new estimator (conf/estimator/<name>.yaml) needs its entry here (the test fails
 #: without it; until then it is drawn grey with a marker picked from its name).
 ESTIMATOR_STYLE = {

@@ -1,5 +1,5 @@
 """Synthetic, manoeuvre-like regressor matrices with a known truth: the shared test data of the estimator
-tests (tests/test_estimators.py) and benchmark (benchmarks/bench_estimators_synthetic.py)."""
+tests (tests/identify/test_estimators.py) and benchmark (benchmarks/bench_estimators_synthetic.py)."""
 from __future__ import annotations
 
 import numpy as np

@@ -33,7 +33,7 @@ factor is an **error** (the mistake is certain, the fix is named); any other rat
 **warning** (a suspicion: a calibration, a current, water-relative velocities, a different reference point).
 The thresholds were set on every real record of ``../shared/data/real`` (HSVA's KVLCC2 and Osaka University's
 Esso Osaka: all pass without a finding) and on simulated records of every vessel at every noise definition
-(``tests/test_plausibility.py``); their reasons are in ``docs/schema.md``.
+(``tests/records/test_plausibility.py``); their reasons are in ``docs/schema.md``.
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Are emcee's regression intervals calibrated? Over many noisy datasets of one simulated case, how often the 90 %
 intervals of the reported parameters cover the truth, and how often the structure's noise-free limit, per
-structure and regression likelihood (``tests/test_regression_calibration.py``,
+structure and regression likelihood (``tests/run/test_regression_calibration.py``,
 ``benchmarks/bench_regression_calibration.py``).
 
 The case is the study's own: the truth vessel simulated once through the training manoeuvres

@@ -26,7 +26,7 @@ Algorithms (range reduction + published minimax/rational approximants):
   then pi/4, pi/2, 3pi/4, pi added as double-double constants. Signed zeros, infinities and NaN follow C99
   Annex F (what ``math.atan2`` does).
 
-Accuracy (``tests/test_sim_speed_equivalence.py`` checks it against ``math`` on 1e5 random arguments per
+Accuracy (``tests/sim/test_sim_speed_equivalence.py`` checks it against ``math`` on 1e5 random arguments per
 function over wide ranges and on edge cases; 1e6 samples give the same): exp within 1 ulp (incl. the
 subnormal range), sin/cos within 2 ulp on |x| < 1e14 (absolute 2.2e-16 near their zeros), atan2 within 1 ulp.
 

@@ -7,7 +7,7 @@ An effect is one class (normally one module in this package, or anywhere importa
     _target_: study.identify.effects.yaw_bias.YawBias
     params: []            # its nonlinear parameters (outer search): name, unit, lo, hi, grid, scale
     options: {}           # passed to the class
-    example: {...}        # a hidden-effect case the generated tests run (tests/test_doctor_effects.py)
+    example: {...}        # a hidden-effect case the generated tests run (tests/doctor/test_doctor_effects.py)
 
 A model is identified with effects by equation error with variable projection
 (``study.identify.with_effects``): for given values of the effects' nonlinear parameters the regression rows are

@@ -19,7 +19,7 @@ from study.configuration import cli
 from study.commands.app import CONF_DIR
 from study.run.settings import check_diagnose, check_run, check_simulate
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _cmd(module, *args, cwd, env_extra=None):

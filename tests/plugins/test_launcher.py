@@ -9,7 +9,7 @@
   exception of a failing task, overrides, task config, job number and id, working dir), the jobs' output
   folders with their ``.hydra`` files and logs, ``hydra.job.chdir``; in worker processes and in this process.
 * The study's sweep gives the same records with ``hydra/launcher=local`` as with Hydra's joblib launcher: same
-  run ids, every number but the timings identical (SLURM: tests/test_slurm.py).
+  run ids, every number but the timings identical (SLURM: tests/plugins/test_slurm.py).
 """
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ from hydra_plugins.study_launcher.compose import JobComposer, config_differences
 from hydra_plugins.study_launcher.launchers import task_groups
 from hydra_plugins.study_launcher.runner import make_chunks
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 CONF = str(REPO / "conf")
 
 

@@ -6,7 +6,7 @@ degrees, time in milliseconds, speeds in knots, u, v off the track by a calibrat
 to end, a position glitch, a channel not logged; n in rpm is a check against the vessel (study.records.vessel_checks), run
 on the record read from its file. Each error names the file, the column, the rows and the fix. Good records raise
 nothing and warn nothing: simulated records of every vessel kind at every noise definition (the real records of
-../shared/data/real: tests/test_schema.py).
+../shared/data/real: tests/records/test_schema.py).
 """
 import re
 import warnings

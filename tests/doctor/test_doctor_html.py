@@ -733,7 +733,7 @@ def test_every_contents_link_of_the_committed_examples_has_its_anchor():
     import json
     from pathlib import Path
 
-    reports = sorted((Path(__file__).resolve().parents[1] / "paper_figs" / "doctor").glob("*/report.json"))
+    reports = sorted((Path(__file__).resolve().parents[2] / "paper_figs" / "doctor").glob("*/report.json"))
     if not reports:
         pytest.skip("no committed example report")
     for path in reports:

@@ -2,7 +2,7 @@
 coefficients (``known``) and for a hull identified from the same records (``mmg_hull``, the user's normal case,
 anchored to coefficients 20 % off the truth):
 the hidden effect ranks first, adding it cuts the validation error at least by half, its parameters come out
-near the truth. Effect sizes, directions and depths are the examples' own (other than tests/test_doctor.py's).
+near the truth. Effect sizes, directions and depths are the examples' own (other than tests/doctor/test_doctor.py's).
 Nothing hidden gives no effect and two hidden effects are found one after the other, with the identified hull.
 A user's effect, written outside the package (docs/examples/effects), is found through ``effect_path``.
 
@@ -23,7 +23,7 @@ from study.sim import load_vessel
 from doctor_cases import VESSEL, U0, check_expectations, make_records, model_for, perturbed_prior
 
 EFFECTS = list_effects()
-EXAMPLES_DIR = Path(__file__).resolve().parents[1] / "docs" / "examples" / "effects"
+EXAMPLES_DIR = Path(__file__).resolve().parents[2] / "docs" / "examples" / "effects"
 _RUNS = {}
 
 
@@ -103,7 +103,7 @@ def _named_one_after_the_other(rep: dict, effects: set) -> None:
     assert errs[2] < errs[1] < errs[0]
 
 
-@pytest.mark.slow  # 80 s; the known-model case of two hidden effects runs by default (tests/test_doctor.py)
+@pytest.mark.slow  # 80 s; the known-model case of two hidden effects runs by default (tests/doctor/test_doctor.py)
 def test_identified_hull_two_hidden_effects_are_found_one_after_the_other():
     example = {"environment": [{"name": "current", "speed_U0": 0.12, "direction_deg": 200.0},
                                {"name": "yaw_bias", "Y": 0.0, "N": -7.0e-4}]}

@@ -256,7 +256,7 @@ def test_loader_ekf_refines_and_auto_keeps_measured(tmp_path):
 
 def test_structure_rts_rows():
     """``smoothing.method: rts``: noise-free, least squares recovers the MMG hull within the tolerance
-    tests/test_identify.py sets for the Savitzky-Golay rows (largest error 2 % of the largest coefficient;
+    tests/identify/test_identify.py sets for the Savitzky-Golay rows (largest error 2 % of the largest coefficient;
     measured 0.3-0.8 % with rts, 0.2-0.3 % with Savitzky-Golay, at 0.05-0.1 s sampling); on a record with
     1 % noise on u, v, r (and GNSS positions, heading) the rows' derivatives of u, v, r are at most half as far
     from the truth as Savitzky-Golay's (measured 4-14 % of the spread against 20-370 %)."""
@@ -331,7 +331,7 @@ def test_study_run_with_rts_structure(tmp_path):
 def test_doctor_gives_the_same_verdict_with_estimated_states(tmp_path):
     """A hidden current (the effect's own example: 12 % of the speed towards 200 deg) on the 7 m KVLCC2: the
     doctor (known model; candidates current, wind, yaw bias) on records with measured u, v, r (1 % noise on
-    every channel, as tests/test_doctor_effects.py makes them) and on the same manoeuvres with positions
+    every channel, as tests/doctor/test_doctor_effects.py makes them) and on the same manoeuvres with positions
     (1.5 cm) and heading (0.15 deg) only, u, v, r estimated by the loader (states='auto'): the same verdict,
     and current speeds within 10 % and directions within 5 deg of each other (measured: 0.1413 m/s towards
     199.6 deg with measured u, v, r; 0.1413 m/s towards 201.4 deg with estimated ones; truth 0.1415 m/s, 200 deg;

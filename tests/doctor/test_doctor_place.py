@@ -7,7 +7,7 @@
 - a set-up effect (yaw bias) is left out of the prediction of a record from another facility, kept for a record
   of the same facility, and kept everywhere when asked (``keep_setup_effects``); the report says which.
 
-Records: the KVLCC2 L7 model (tests/test_doctor.py's simulator and noise), 60 s each, so every case runs in
+Records: the KVLCC2 L7 model (tests/doctor/test_doctor.py's simulator and noise), 60 s each, so every case runs in
 seconds.
 """
 import math

@@ -11,7 +11,7 @@ import pytest
 from study.identify.estimators.bayes import EmceeSampler
 from study.identify.posterior import diagnostics, inference_data
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _chain(seed, coef):

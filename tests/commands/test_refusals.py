@@ -22,7 +22,7 @@ from study.configuration import cli
 from study.configuration.compose import UntrustedCodeError, check_target, check_targets, compose
 from study.run.settings import ENUMS, check_diagnose, check_run, check_simulate
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 EXAMPLES = REPO / "docs" / "examples" / "effects"
 
 

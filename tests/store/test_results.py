@@ -16,7 +16,7 @@ from study.run.executor import run_guarded
 from study.store import (NON_SCIENTIFIC_KEYS, ResultsFolderError, ResultStore, provenance, read_table, run_id,
                          validate_record)
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _conf(**over):

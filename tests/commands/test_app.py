@@ -14,7 +14,7 @@ from omegaconf import OmegaConf
 from study.commands.app import CONF_DIR
 from study.run.pipeline import run_study
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 GROUPS = ["vessel", "depth", "environment", "noise", "maneuvers", "model", "structure", "estimator"]
 
 

@@ -2,7 +2,7 @@
 structure and on output error lands in the table (regression estimators skipped on output error, with the
 reason); ``python -m study figures`` rebuilds the outputs twice, byte for byte the same, with CLAIMS.md and a
 README listing each output. A rebuild from a table holding one study leaves every other study's outputs and rows
-as they were. (A killed sweep resuming without recomputing: tests/test_app.py.)"""
+as they were. (A killed sweep resuming without recomputing: tests/commands/test_app.py.)"""
 import filecmp
 import json
 import re
@@ -15,7 +15,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _env(results):
@@ -161,7 +161,7 @@ def _discovered_studies() -> list:
 
 @pytest.mark.parametrize("name", _discovered_studies())
 def test_every_study_follows_the_contract(name):
-    """Each discovered study (study/figures/studies/<name>.py) as tests/test_estimators.py checks each estimator:
+    """Each discovered study (study/figures/studies/<name>.py) as tests/identify/test_estimators.py checks each estimator:
     its module names itself, says which seed paper's claim it tests (or None), builds through the builder with the
     table's runs and parameters and appends its claims; its experiment (conf/experiment/<name>.yaml) runs it as a
     sweep under its name. (Its figures rebuilt from a table: the tests above, on smoke and the committed tables.)"""

@@ -1,6 +1,6 @@
 """The candidate effects (conf/effect/*.yaml, study/identify/effects/): the contract, checked on every discovered
-effect as tests/test_estimators.py checks every estimator. Whether each effect is *found* when hidden in records
-is tests/test_doctor_effects.py's (generated from each YAML's ``example``); here, fast, that each one is a
+effect as tests/identify/test_estimators.py checks every estimator. Whether each effect is *found* when hidden in records
+is tests/doctor/test_doctor_effects.py's (generated from each YAML's ``example``); here, fast, that each one is a
 well-formed plugin: its YAML names it and a class following ``study.identify.effects.Effect``, its nonlinear
 parameters have ordered bounds and a start grid inside them, and identification with it (one equation-error
 solve at its grid's first point, on a short noise-free record of the 7 m KVLCC2) gives a finite estimate of
@@ -39,7 +39,7 @@ def records():
 
 
 def test_the_catalogue_is_discovered_from_its_yaml_files():
-    stems = sorted(p.stem for p in (Path(__file__).resolve().parents[1] / "conf" / "effect").glob("*.yaml"))
+    stems = sorted(p.stem for p in (Path(__file__).resolve().parents[2] / "conf" / "effect").glob("*.yaml"))
     assert sorted(EFFECTS) == stems
 
 

@@ -25,7 +25,7 @@ from study.run.records_run import FILE_KEYS, RecordsInputError
 from study.run.executor import run_guarded
 from study.store import ResultStore, run_id
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 VESSEL = "kvlcc2"
 TRAIN = {"train_zz10": ("zigzag_10_10", 0), "train_zz20": ("zigzag_20_20", 0), "train_rr": ("random_rudder", 0)}
 VALIDATE = {"val_turn35": ("turning_35", 1), "val_zz35": ("zigzag_35_35", 1)}

@@ -1,7 +1,7 @@
 """Plausibility checks of records against the vessel (study.records.vessel_checks), run before the doctor fits anything.
 
 Records: the 7 m KVLCC2 model (kvlcc2_l7) simulated through a 10/10 zigzag (200 s) and measured at 10 Hz with
-1 % white noise, as in tests/test_doctor.py. A clean record passes; a flipped rudder, a full-scale record given
+1 % white noise, as in tests/doctor/test_doctor.py. A clean record passes; a flipped rudder, a full-scale record given
 to the model-scale vessel and n in rpm each raise with a message naming the file, the column and the fix; a
 run without rudder motion says nothing about the rudder sign; other vessel kinds pass clean.
 """

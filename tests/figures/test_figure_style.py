@@ -2,7 +2,7 @@
 colour and marker, far enough apart to be told apart; the checker finds small text, unlabelled axes, axes without
 units and log axes with too few ticks; the figures of the studies without a committed table (grand, emcee_kt)
 pass it on a small synthetic table, and an estimator keeps its colour when a figure shows a subset. (The committed
-studies' figures are checked when they are rebuilt: tests/test_figures.py.)"""
+studies' figures are checked when they are rebuilt: tests/figures/test_figures.py.)"""
 import itertools
 from pathlib import Path
 
@@ -16,7 +16,7 @@ from study.figures.style import (
     ESTIMATOR_STYLE, STRUCTURE_STYLE, estimator_style, log_ticks, readability_problems,
 )
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _lab(hexc: str) -> np.ndarray:

@@ -22,7 +22,7 @@ FAST = {"emcee": ["estimator.params.target_ess=100", "estimator.params.min_tau_m
                   "estimator.params.max_steps=1500", "estimator.params.init=local"],
         "de": ["estimator.params.maxiter=60"],
         # one stage over every record: the app's path, with the accuracy check below; the staging itself (Zou et
-        # al.'s steps, biased on this ship by design) is tested in tests/test_staged_de.py
+        # al.'s steps, biased on this ship by design) is tested in tests/identify/test_staged_de.py
         "de_staged": ["estimator.params.maxiter=60", "estimator.params.stages=[{records:[0,1,2]}]"]}
 
 

@@ -12,7 +12,7 @@ import pytest
 
 from study.doctor.report_schema import Report, ReportError
 
-EXAMPLES = sorted((Path(__file__).resolve().parents[1] / "paper_figs" / "doctor").glob("*/report.json"))
+EXAMPLES = sorted((Path(__file__).resolve().parents[2] / "paper_figs" / "doctor").glob("*/report.json"))
 
 
 def _same(a, b) -> bool:

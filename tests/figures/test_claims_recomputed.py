@@ -13,7 +13,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1] / "paper_figs"
+ROOT = Path(__file__).resolve().parents[2] / "paper_figs"
 TIE = 0.05
 
 

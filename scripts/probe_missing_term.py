@@ -2,8 +2,9 @@
 KVLCC2's MMG hull and the waterjet USV's full model (the ``emcee_calibration_stress`` set-up: 1 % white noise,
 0.005 L/U0), exact and with N'vvr left out, over datasets 1-10. Per equation it prints the largest error of a
 coefficient in posterior sd (``z``, against the vessel's values), the whitened residual's lag-1 autocorrelation
-(what ``study.identify.trust`` checks), the coefficients' heterogeneity over the quartiles of the fitted value
-(``H``, chi-square per degree of freedom, and its upper tail: ``study.identify.trust.heterogeneity``, also checked)
+(what ``study.identify.trust`` checks), the coefficients' heterogeneity over four groups of rows by where they lie in the records'
+range (``H``, chi-square per degree of freedom, and its upper tail: ``study.identify.trust.heterogeneity`` on
+``range_key``, also checked)
 and RESET's F (Ramsey 1969: the whitened residual regressed on the square and cube of the fitted value, whitened the
 same way; about 1 for a correct model with white rows).
 
@@ -23,8 +24,8 @@ from omegaconf import OmegaConf  # noqa: E402
 from study.identify.estimators import make_estimator  # noqa: E402
 from study.identify.estimators.prior import gls_posterior  # noqa: E402
 from study.identify.rows import prepare, regression_rows, row_errors, truncation_rows  # noqa: E402
-from study.identify.trust import heterogeneity  # noqa: E402
-from study.run.pipeline import SimulatedJob
+from study.identify.trust import heterogeneity, range_key  # noqa: E402
+from study.run.pipeline import SimulatedJob  # noqa: E402
 
 
 def compose_run(case: str, omit: str, structure: str) -> dict:
@@ -66,7 +67,7 @@ def probe(case: str, omit: str, structure: str, datasets) -> None:
             if pr.noise_operators.centred:
                 Xc = np.column_stack([Xc, np.ones(len(yc))])
             yh = Xc[:, :k] @ mean
-            H, tail = heterogeneity(noise.whiten(Xc), noise.whiten(yc), yh)
+            H, tail = heterogeneity(noise.whiten(Xc), noise.whiten(yc), range_key(yh, noise.b + 1))
             yh = yh / (np.std(yh) or 1.0)
             F = reset_f(noise.whiten(Xc), noise.whiten(yc), np.column_stack([noise.whiten(yh ** 2),
                                                                             noise.whiten(yh ** 3)]))

@@ -16,7 +16,8 @@ identification engine, means changing it changes the code fingerprint of emcee's
    posterior sd, against :data:`BIAS_LIMIT_SD`, or, where the likelihood removed it, against
    :data:`CORRECTED_LIMIT_SD`.
 4. **The same coefficients everywhere in the records** (:func:`heterogeneity`): the whitened rows split into four
-   groups by the size of the fitted value, the coefficients fitted on each group apart. For a model that holds they
+   groups by where they lie in the records' range (:func:`range_key`: the size of the fitted value of their
+   neighbours), the coefficients fitted on each group apart. For a model that holds they
    agree within their own spread; a term the model lacks that its other terms nearly absorb leaves the residual
    white but is absorbed differently where the states are small and where they are large, so the groups'
    coefficients disagree (a Chow (1960) test across the regressors' range rather than across time): their
@@ -35,7 +36,7 @@ import numpy as np
 from scipy import stats
 
 __all__ = ["ACF_LIMIT", "BIAS_LIMIT_SD", "CORRECTED_LIMIT_SD", "HETEROGENEITY_GROUPS", "HETEROGENEITY_P",
-           "heterogeneity", "run_verdict", "verdict", "whiteness"]
+           "RANGE_KEY_ROWS", "heterogeneity", "range_key", "run_verdict", "verdict", "whiteness"]
 
 #: the largest autocorrelation (lags 1 and 2) of the whitened residual a trusted run may show. Assumption
 #: (labelled): an effect size, not a test (thousands of rows make any departure significant). Where the regressors
@@ -50,12 +51,13 @@ HETEROGENEITY_GROUPS = 4
 #: the groups' coefficients disagree beyond their spread when their chi-square (chi2((groups - 1) p) for a model
 #: that holds, p coefficients) has an upper tail below this. A test, not an effect size: the statistic is already in
 #: units of the groups' own posterior spread, which is what an interval's coverage depends on; 0.1 % per equation
-#: keeps false flags rare over a study's thousands of equations. Measured (``scripts/probe_missing_term.py``;
-#: KVLCC2's MMG hull and the waterjet USV's full model, central rows, 1 % white noise, 0.005 L/U0, half-length
-#: manoeuvres, datasets 1-10, every equation), as chi-square per degree of freedom: 0.5-1.6 (KVLCC2) and 0.5-2.6
-#: (USV) with the exact model, one USV run of ten flagged (its yaw equation, tail 8e-4); without N'vvr, equation N,
-#: 1.9-3.4 (KVLCC2, eight of ten flagged) and 8.0-13.7 (USV, ten of ten)
+#: keeps false flags rare over a study's thousands of equations. What it measures on the two calibration models,
+#: with and without a term, is in docs/studies/index.md (``scripts/probe_missing_term.py`` prints it)
 HETEROGENEITY_P = 1e-3
+#: rows on each side whose |fitted value| :func:`range_key` averages into a row's place in the records' range.
+#: Assumption: few enough that the states barely move over them at a study's sampling, enough to average the
+#: fitted value's noise down
+RANGE_KEY_ROWS = 5
 
 #: a reported parameter biased by more than this many posterior sd: the intervals are not trusted
 BIAS_LIMIT_SD = 1.0
@@ -99,18 +101,38 @@ def verdict(bias_sd: dict, structure_name: str, dropped_differences: int = 0, co
     return True, f"{structure_name} truncation bias at most {b:.2f} posterior sd ({worst}): intervals trusted"
 
 
-def heterogeneity(Xw: np.ndarray, yw: np.ndarray, fitted: np.ndarray,
+def range_key(fitted: np.ndarray, shared: int, rows: int = RANGE_KEY_ROWS) -> np.ndarray:
+    """Where each row lies in the records' range, for :func:`heterogeneity`: the mean |fitted value| of the ``rows``
+    rows on each side of it beyond the ``shared`` nearest (fewer at the ends of the rows).
+
+    ``shared`` is how far a row's noise reaches: the row-noise model's bandwidth plus one, since a row's
+    regressors may hold the samples its neighbours' responses hold. A row's own fitted value carries its own
+    noise, and the integral structure's rows share that noise with their response (both hold the samples at the
+    window's two ends): groups sorted by it are selected on their noise, and their fits disagree where the model
+    holds. The neighbours' values lie in the same part of the range but carry none of the row's noise."""
+    f = np.abs(np.asarray(fitted, float))
+    n = len(f)
+    cum = np.concatenate([[0.0], np.cumsum(f)])
+    i = np.arange(n)
+    lo_a, lo_b = np.clip(i - shared - rows, 0, n), np.clip(i - shared, 0, n)
+    hi_a, hi_b = np.clip(i + shared + 1, 0, n), np.clip(i + shared + 1 + rows, 0, n)
+    total = cum[lo_b] - cum[lo_a] + cum[hi_b] - cum[hi_a]
+    count = (lo_b - lo_a) + (hi_b - hi_a)
+    return np.where(count > 0, total / np.maximum(count, 1), f)
+
+
+def heterogeneity(Xw: np.ndarray, yw: np.ndarray, key: np.ndarray,
                   groups: int = HETEROGENEITY_GROUPS) -> tuple[float, float]:
     """(chi-square per degree of freedom, its upper tail) of the coefficients fitted apart on groups of the whitened
     rows: the rows ``Xw``, ``yw`` (whitened by the run's row-noise model) split into ``groups`` of equal size by
-    ``|fitted|`` (the rows' fitted value before whitening), least squares on each, and the chi-square of the
-    groups' estimates about their precision-weighted mean, sum_g (b_g - b)' P_g (b_g - b) with P_g the group's
-    sandwich precision, on (groups - 1) p degrees of freedom. About 1 and its tail uniform where the model holds;
-    NaNs when a group has no more rows than coefficients or no residual."""
+    ``|key|`` (where each row lies in the records' range: :func:`range_key`), least squares on each, and the
+    chi-square of the groups' estimates about their precision-weighted mean, sum_g (b_g - b)' P_g (b_g - b) with
+    P_g the group's sandwich precision, on (groups - 1) p degrees of freedom. About 1 and its tail uniform where the
+    model holds; NaNs when a group has no more rows than coefficients or no residual."""
     Xw, yw = np.asarray(Xw, float), np.asarray(yw, float)
     p = Xw.shape[1]
     nan = (float("nan"), float("nan"))
-    parts = np.array_split(np.argsort(np.abs(np.asarray(fitted, float)), kind="stable"), groups)
+    parts = np.array_split(np.argsort(np.abs(np.asarray(key, float)), kind="stable"), groups)
     est, prec = [], []
     for idx in parts:
         A, b = Xw[idx], yw[idx]

@@ -179,6 +179,19 @@ def test_emcee_samples_the_closed_form_posterior(kt):
                 p, r)
 
 
+def test_the_heterogeneity_check_passes_the_exact_model_on_integral_rows(kt):
+    """Integral rows hold the samples at their window's two ends in both the response and the regressors, so a
+    row's own fitted value carries the response's noise: groups sorted by it were selected on their noise and
+    flagged the exact KT model on every dataset (tails below 1e-4). Sorted by their neighbours' fitted value
+    (study.identify.trust.range_key), the exact model passes."""
+    cfg = dict(read_config("estimator", "emcee"))
+    cfg["params"] = dict(cfg["params"], target_ess=200, min_tau_multiple=20)
+    st = make_structure("integral")
+    tails = [identify(kt.model, st, cfg, cal.records(kt, seed), seed=seed).metrics["est_N_heterogeneity_p"]
+             for seed in (1, 2, 3, 4)]
+    assert all(1e-3 < t <= 1.0 for t in tails), tails
+
+
 @pytest.mark.long  # minutes of many datasets: run by hand (python -m pytest -m long)
 @pytest.mark.slow
 def test_regression_intervals_are_calibrated_per_structure(kt, kt_1s):

@@ -18,7 +18,7 @@ import numpy as np
 from scipy import linalg
 
 from ..row_errors import N_PROBES
-from ..trust import heterogeneity
+from ..trust import heterogeneity, range_key
 from .base import Estimator, as_arrays
 
 
@@ -304,7 +304,7 @@ class EmceeSampler(Estimator):
                 if noise_operators.centred:  # the centring's intercept, as gls_posterior fits it
                     Xc = np.column_stack([Xc, np.ones(len(yc))])
                 w = self.row_noise_.whiten
-                per_dof, tail = heterogeneity(w(Xc), w(yc), fitted)
+                per_dof, tail = heterogeneity(w(Xc), w(yc), range_key(fitted, self.row_noise_.b + 1))
                 self.diagnostics_.update(heterogeneity=per_dof, heterogeneity_p=tail)
             return self
         ls, _, rank, _ = linalg.lstsq(X, y, lapack_driver="gelsd")

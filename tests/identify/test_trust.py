@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from study.identify.trust import ACF_LIMIT, HETEROGENEITY_P, heterogeneity, run_verdict, whiteness
+from study.identify.trust import ACF_LIMIT, HETEROGENEITY_P, heterogeneity, range_key, run_verdict, whiteness
 
 
 def test_a_white_residual_leaves_the_truncation_verdict_alone():
@@ -72,3 +72,17 @@ def test_a_heterogeneous_run_is_flagged_naming_its_equation():
 def test_the_heterogeneity_flag_is_the_test_level(tail, trusted):
     m = {"est_X_heterogeneity": 2.0, "est_X_heterogeneity_p": tail}
     assert run_verdict("regression", "central", {}, 0, True, m)[0] is trusted
+
+
+def test_a_rows_place_in_the_range_carries_none_of_the_noise_it_shares():
+    """range_key: a row's key is its neighbours' mean |fitted value|, beyond the rows whose noise it shares; changing
+    the row and those within ``shared`` of it leaves its key alone, changing a neighbour beyond them does not."""
+    rng = np.random.default_rng(3)
+    f = rng.standard_normal(60)
+    key = range_key(f, shared=2, rows=5)
+    assert key[30] == pytest.approx(np.mean(np.abs(np.r_[f[23:28], f[33:38]])))
+    g = f.copy()
+    g[28:33] += 100.0  # the row itself and the rows sharing its noise
+    assert range_key(g, shared=2, rows=5)[30] == pytest.approx(key[30])
+    g[33] += 100.0
+    assert range_key(g, shared=2, rows=5)[30] != pytest.approx(key[30])

@@ -24,6 +24,7 @@ from .estimators import make_estimator
 from .estimators.problem import RegressionProblem
 from .priors import prior_for
 from .rows import Prepared, prepare, regression_rows, row_errors, same_rows_as_central, term_scales, truncation_rows
+from .trust import NEIGHBOUR_DEGREE
 
 logger = logging.getLogger(__name__)
 
@@ -209,13 +210,15 @@ def fit_regression(model, structure, estimator_cfg: dict, records, seed: int = 0
         trunc_rows = truncation_rows(model, structure, records)
         errors = row_errors(model, structure, records, prepared, trunc_rows, seed=seed, n_probes=est.row_error_probes)
         fit.timings["row_errors"] = time.perf_counter() - t0
+    neighbours = _neighbours(model, structure, records, prepared, seed) \
+        if wants_ops and est.checks_omitted_terms and not cand else {}
     collin, coefs, fit_time = {}, {}, 0.0
     bias_reg, dropped_diff = {}, 0  # the truncation bias of a row-noise model's intervals (study.identify.truncation)
     for eq, pr in prepared.items():
         collin[eq] = _collinearity_metrics(eq, pr, fit.metrics)
         est = make_estimator(estimator_cfg)
         problem = RegressionProblem(pr.X, pr.y, _equation_prior(prior, pr.X.columns), pr.noise_operators,
-                                    errors.get(eq), equation=eq)
+                                    errors.get(eq), equation=eq, neighbours=neighbours.get(eq))
         t0 = time.perf_counter()
         est.fit_problem(problem, progress=progress)
         fit_time += time.perf_counter() - t0
@@ -238,6 +241,22 @@ def fit_regression(model, structure, estimator_cfg: dict, records, seed: int = 0
         if not verdict[0]:
             logger.warning("intervals not trusted: %s", verdict[1])
     return fit
+
+
+def _neighbours(model, structure, records, prepared: dict, seed: int) -> dict:
+    """Per equation the terms the model lacks (its states' monomials up to ``trust.NEIGHBOUR_DEGREE``,
+    ``Model.candidates``) on the same training rows as ``prepared``; empty where the model has no candidates or
+    the structure's processing does not keep the same rows."""
+    try:
+        built = regression_rows(model, structure, records, candidates=NEIGHBOUR_DEGREE)
+    except NotImplementedError:
+        return {}
+    out = {}
+    for eq, pr in prepare(model, structure, records, candidates=NEIGHBOUR_DEGREE, seed=seed, rows=built).items():
+        same = eq in prepared and len(pr.y) == len(prepared[eq].y) and np.array_equal(pr.y, prepared[eq].y)
+        if same and pr.X.shape[1] > pr.n_model:
+            out[eq] = pr.X.iloc[:, pr.n_model:]
+    return out
 
 
 def _run_prior(model, estimator_cfg: dict, metrics: dict) -> dict | None:

@@ -34,6 +34,8 @@ def test_declared_capabilities_match_the_signatures(cls):
         assert cls.reports_progress == ("progress" in fit), "reports_progress must say whether fit takes progress"
         for a in ROW_NOISE_ARGS:
             assert cls.models_row_noise == (a in fit), f"models_row_noise must say whether fit takes {a}"
+        assert cls.checks_omitted_terms == ("neighbours" in fit), \
+            "checks_omitted_terms must say whether fit takes neighbours"
     simulates = "output_error" in cls.problem_types
     assert simulates == (cls.fit_output_error is not Estimator.fit_output_error), \
         "problem_types must name output_error exactly when fit_output_error is implemented"
@@ -69,10 +71,13 @@ def test_fit_problem_passes_exactly_what_the_estimator_declares(name, monkeypatc
     X = pd.DataFrame({"a": [1.0, 2.0, 3.0], "b": [0.0, 1.0, 0.5]})
     prior = {"a": (1.0, 0.5), "b": (0.0, 1.0)} if est.accepts_prior else None
     ops = (object(), object()) if est.models_row_noise else (None, None)
+    neighbours = pd.DataFrame({"c": [1.0, 4.0, 9.0]}) if est.checks_omitted_terms else None
     with pytest.raises(_Recorded):
-        est.fit_problem(RegressionProblem(X, np.ones(3), prior, *ops, equation="X"), progress=True)
+        est.fit_problem(RegressionProblem(X, np.ones(3), prior, *ops, equation="X", neighbours=neighbours),
+                        progress=True)
     expected = ({"progress"} if est.reports_progress else set()) | ({"prior"} if est.accepts_prior else set()) | \
-        (set(ROW_NOISE_ARGS) if est.models_row_noise else set())
+        (set(ROW_NOISE_ARGS) if est.models_row_noise else set()) | \
+        ({"neighbours"} if est.checks_omitted_terms else set())
     assert set(seen) == expected
     if est.accepts_prior:
         assert seen["prior"] is prior
@@ -93,6 +98,9 @@ def test_fit_problem_refuses_what_the_estimator_does_not_declare(name):
     if not est.models_row_noise:
         with pytest.raises(ValueError, match="does not model the rows' noise"):
             est.fit_problem(RegressionProblem(X, np.ones(3), noise_operators=object()))
+    if not est.checks_omitted_terms:
+        with pytest.raises(ValueError, match="does not check for omitted terms"):
+            est.fit_problem(RegressionProblem(X, np.ones(3), neighbours=pd.DataFrame({"c": [1.0, 4.0, 9.0]})))
 
 
 @pytest.mark.parametrize("name", list_estimators())

@@ -43,6 +43,9 @@ Class attributes declare what an estimator can do (the base class gives every de
     (``study.identify.row_errors.RowErrors``), and sets ``row_noise_`` (the fitted noise model or None). Whether
     one instance wants them (its likelihood) is :attr:`Estimator.uses_noise_operators` and
     :attr:`Estimator.uses_row_errors`.
+``checks_omitted_terms``
+    ``fit`` takes ``neighbours``: columns of terms the model lacks, on the same rows (its trust verdict tests the
+    model against them, ``study.identify.trust.omitted_terms``).
 ``reports_progress``
     ``fit`` (and ``fit_output_error``) take ``progress``.
 
@@ -155,6 +158,8 @@ class Estimator:
     accepts_prior: ClassVar[bool] = False
     #: ``fit`` takes ``noise_operators`` and ``row_errors`` and sets ``row_noise_``
     models_row_noise: ClassVar[bool] = False
+    #: ``fit`` takes ``neighbours`` (terms the model lacks, on the same rows) and tests the model against them
+    checks_omitted_terms: ClassVar[bool] = False
     #: ``fit`` and ``fit_output_error`` take ``progress``
     reports_progress: ClassVar[bool] = False
 
@@ -208,6 +213,10 @@ class Estimator:
             if not self.models_row_noise:
                 raise ValueError(f"{type(self).__name__} does not model the rows' noise: no {name} for it")
             out[name] = value
+        if problem.neighbours is not None:
+            if not self.checks_omitted_terms:
+                raise ValueError(f"{type(self).__name__} does not check for omitted terms: no neighbours for it")
+            out["neighbours"] = problem.neighbours
         return out
 
     def trust_verdict(self, structure_name: str, bias_sd: dict, dropped_differences: int, corrected: bool,

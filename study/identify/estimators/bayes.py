@@ -18,7 +18,7 @@ import numpy as np
 from scipy import linalg
 
 from ..row_errors import N_PROBES
-from ..trust import heterogeneity, range_key
+from ..trust import heterogeneity, omitted_terms, range_key
 from .base import Estimator, as_arrays
 
 
@@ -66,6 +66,7 @@ class EmceeSampler(Estimator):
     problem_types = frozenset({"regression", "output_error"})
     accepts_prior = True
     models_row_noise = True
+    checks_omitted_terms = True
     reports_progress = True
 
     def __init__(self, n_walkers: int | None = None, target_ess: int = 1000, max_steps: int = 20000,
@@ -277,11 +278,13 @@ class EmceeSampler(Estimator):
         return mean, cov, {"whitened": 0.0, "whitening_failed": failed, "sigma": diag["sigma"],
                            "data_blocks": diag["data_blocks"]}, None
 
-    def fit(self, X, y, progress: bool = False, prior: dict | None = None, noise_operators=None, row_errors=None):
+    def fit(self, X, y, progress: bool = False, prior: dict | None = None, noise_operators=None, row_errors=None,
+            neighbours=None):
         """Sample the posterior of ``y = X theta + e``. ``noise_operators``: the structure's, a
         ``study.identify.row_noise.RowOperators`` (``study.identify.fit`` passes it), used by the 'regression'
         likelihood, with ``row_errors`` (``study.identify.row_errors.RowErrors``) removed when ``correct_rows``;
-        ``prior``: an informative prior (then the MAP estimator's posterior is sampled, whatever the likelihood)."""
+        ``prior``: an informative prior (then the MAP estimator's posterior is sampled, whatever the likelihood);
+        ``neighbours``: terms the model lacks on the same rows, tested for the trust verdict (regression only)."""
         if self.likelihood not in self.LIKELIHOODS:
             raise ValueError(f"emcee: likelihood must be one of {self.LIKELIHOODS}, got {self.likelihood!r}")
         X, y, names = as_arrays(X, y)
@@ -306,6 +309,10 @@ class EmceeSampler(Estimator):
                 w = self.row_noise_.whiten
                 per_dof, tail = heterogeneity(w(Xc), w(yc), range_key(fitted, self.row_noise_.b + 1))
                 self.diagnostics_.update(heterogeneity=per_dof, heterogeneity_p=tail)
+                if neighbours is not None and len(neighbours) == len(yc):  # ... and does it lack a term?
+                    names_z = list(getattr(neighbours, "columns", range(np.shape(neighbours)[1])))
+                    per_dof, tail, top = omitted_terms(w(Xc), w(np.asarray(neighbours, float)), w(yc), names_z)
+                    self.diagnostics_.update(omitted_terms=per_dof, omitted_terms_p=tail, omitted_terms_top=top)
             return self
         ls, _, rank, _ = linalg.lstsq(X, y, lapack_driver="gelsd")
         if rank < k:

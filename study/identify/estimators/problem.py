@@ -31,6 +31,9 @@ class RegressionProblem:
         The rows' truncation errors and the probes of the regressors' noise.
     equation : str
         The equation's name, for messages.
+    neighbours : pandas.DataFrame or None
+        Terms the model lacks (its states' monomials, ``Model.candidates``), built by the same structure on the
+        same training rows: what an estimator that checks its model (``checks_omitted_terms``) tests it against.
     """
 
     X: pd.DataFrame
@@ -39,6 +42,7 @@ class RegressionProblem:
     noise_operators: object = None
     row_errors: object = None
     equation: str = ""
+    neighbours: pd.DataFrame | None = None
     problem_type: ClassVar[str] = "regression"
 
     @property

@@ -5,8 +5,9 @@ coefficient in posterior sd (``z``, against the vessel's values), the whitened r
 (what ``study.identify.trust`` checks), the coefficients' heterogeneity over four groups of rows by where they lie in the records'
 range (``H``, chi-square per degree of freedom, and its upper tail: ``study.identify.trust.heterogeneity`` on
 ``range_key``, also checked)
-and RESET's F (Ramsey 1969: the whitened residual regressed on the square and cube of the fitted value, whitened the
-same way; about 1 for a correct model with white rows).
+and the omitted-terms test (``W``, the Wald statistic per degree of freedom of the states' monomials up to degree 3
+the model leaves out, its upper tail and the term that alone explains most: ``study.identify.trust.omitted_terms``,
+also checked).
 
 Run from the repository's root: ``python scripts/probe_missing_term.py [case] [structure]`` (defaults kvlcc2_mmg,
 central); about 2 min per model and omission on one core.
@@ -23,8 +24,9 @@ from omegaconf import OmegaConf  # noqa: E402
 
 from study.identify.estimators import make_estimator  # noqa: E402
 from study.identify.estimators.prior import gls_posterior  # noqa: E402
+from study.identify.fit import _neighbours  # noqa: E402
 from study.identify.rows import prepare, regression_rows, row_errors, truncation_rows  # noqa: E402
-from study.identify.trust import heterogeneity, range_key  # noqa: E402
+from study.identify.trust import heterogeneity, omitted_terms, range_key  # noqa: E402
 from study.run.pipeline import SimulatedJob  # noqa: E402
 
 
@@ -34,14 +36,6 @@ def compose_run(case: str, omit: str, structure: str) -> dict:
                       "noise=low_relative", "noise.sample_dt_LU=0.005", f"model.omit={omit}",
                       f"structure={structure}"])
     return OmegaConf.to_container(cfg, resolve=True)
-
-
-def reset_f(Xw: np.ndarray, yw: np.ndarray, W: np.ndarray) -> float:
-    """F of the added columns ``W`` in the least squares of ``yw`` on ``[Xw, W]``."""
-    rw = yw - Xw @ np.linalg.lstsq(Xw, yw, rcond=None)[0]
-    Xa = np.column_stack([Xw, W])
-    ra = yw - Xa @ np.linalg.lstsq(Xa, yw, rcond=None)[0]
-    return float(((rw @ rw - ra @ ra) / W.shape[1]) / (ra @ ra / (len(yw) - Xa.shape[1])))
 
 
 def probe(case: str, omit: str, structure: str, datasets) -> None:
@@ -55,6 +49,7 @@ def probe(case: str, omit: str, structure: str, datasets) -> None:
                        rows=regression_rows(job.model, job.structure, records))
         errs = row_errors(job.model, job.structure, records, prep,
                           truncation_rows(job.model, job.structure, records), seed=s, n_probes=est.n_probes)
+        near = _neighbours(job.model, job.structure, records, prep, seed=s)
         out = []
         for eq, pr in prep.items():
             X, y = pr.X.to_numpy(float), np.asarray(pr.y, float)
@@ -68,10 +63,10 @@ def probe(case: str, omit: str, structure: str, datasets) -> None:
                 Xc = np.column_stack([Xc, np.ones(len(yc))])
             yh = Xc[:, :k] @ mean
             H, tail = heterogeneity(noise.whiten(Xc), noise.whiten(yc), range_key(yh, noise.b + 1))
-            yh = yh / (np.std(yh) or 1.0)
-            F = reset_f(noise.whiten(Xc), noise.whiten(yc), np.column_stack([noise.whiten(yh ** 2),
-                                                                            noise.whiten(yh ** 3)]))
-            out.append(f"{eq}: z={z:5.1f} acf1={diag['whitened_acf1']:+.2f} H={H:5.2f} (p {tail:.0e}) F={F:6.1f}")
+            W, w_tail, top = omitted_terms(noise.whiten(Xc), noise.whiten(near[eq].to_numpy(float)), noise.whiten(yc),
+                                           list(near[eq].columns))
+            out.append(f"{eq}: z={z:5.1f} acf1={diag['whitened_acf1']:+.2f} H={H:5.2f} (p {tail:.0e}) "
+                       f"W={W:5.2f} (p {w_tail:.0e}, {top})")
         print(f"{case} {structure} omit={omit} dataset {s}: " + " | ".join(out), flush=True)
 
 

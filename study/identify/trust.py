@@ -8,26 +8,29 @@ identification engine, means changing it changes the code fingerprint of emcee's
 1. **The likelihood's own assumptions**: the independent-rows likelihood (``regression_iid``) is never calibrated;
    rows differenced and then cut (``diff_center``'s split, z-score cleaning) leave gaps the whitening cannot undo;
    the regressors' noise too large for a first-order removal (``study.identify.row_errors``).
-2. **The residual is the noise the likelihood models**: whitened by the fitted row-noise model, the rows' residual
+2. **The records carry measurement noise**: a regression whose rows fit to within :data:`NOISE_FREE_GAP` of their
+   variance (1 - R^2) in any equation has no noise the likelihood could model (noise-free simulated records): its
+   residual is the simulation's and the structure's numerical error, and its intervals would measure that.
+3. **The residual is the noise the likelihood models**: whitened by the fitted row-noise model, the rows' residual
    of a well-specified regression is white; a lag-1 or lag-2 autocorrelation beyond :data:`ACF_LIMIT` in any
    equation says the rows' errors are something else (no measurement noise at all, coloured noise, a term the
    model lacks), which the intervals do not cover.
-3. **The structure's truncation** (``study.identify.truncation``): its estimated bias of each reported parameter, in
+4. **The structure's truncation** (``study.identify.truncation``): its estimated bias of each reported parameter, in
    posterior sd, against :data:`BIAS_LIMIT_SD`, or, where the likelihood removed it, against
    :data:`CORRECTED_LIMIT_SD`.
-4. **The same coefficients everywhere in the records** (:func:`heterogeneity`): the whitened rows split into four
+5. **The same coefficients everywhere in the records** (:func:`heterogeneity`): the whitened rows split into four
    groups by where they lie in the records' range (:func:`range_key`: the size of the fitted value of their
    neighbours), the coefficients fitted on each group apart. For a model that holds they
    agree within their own spread; a term the model lacks that its other terms nearly absorb leaves the residual
    white but is absorbed differently where the states are small and where they are large, so the groups'
    coefficients disagree (a Chow (1960) test across the regressors' range rather than across time): their
    chi-square's upper tail against :data:`HETEROGENEITY_P`.
-5. **No neighbouring term the records ask for** (:func:`omitted_terms`): the model's own states' monomials up to
+6. **No neighbouring term the records ask for** (:func:`omitted_terms`): the model's own states' monomials up to
    :data:`NEIGHBOUR_DEGREE` that it lacks (``Model.candidates``, built by the same structure on the same rows),
    added to the whitened rows together; a robust Wald test of their coefficients (the score test for omitted
    variables, e.g. Wooldridge 2010, *Econometric Analysis of Cross Section and Panel Data*, 2nd ed., sec. 12.6),
    its upper tail against :data:`OMITTED_TERMS_P`. A missing term the others absorb alike over the whole range
-   escapes check 4 but not this one when it is, or resembles, a monomial of the states.
+   escapes check 5 but not this one when it is, or resembles, a monomial of the states.
 
 The truncation limits' reasons are in :mod:`study.identify.truncation`'s docstring.
 
@@ -43,7 +46,7 @@ import numpy as np
 from scipy import stats
 
 __all__ = ["ACF_LIMIT", "BIAS_LIMIT_SD", "CORRECTED_LIMIT_SD", "HETEROGENEITY_GROUPS", "HETEROGENEITY_P",
-           "NEIGHBOUR_DEGREE", "OMITTED_TERMS_P", "RANGE_KEY_ROWS", "heterogeneity", "omitted_terms", "range_key",
+           "NEIGHBOUR_DEGREE", "NOISE_FREE_GAP", "OMITTED_TERMS_P", "RANGE_KEY_ROWS", "heterogeneity", "omitted_terms", "range_key",
            "run_verdict", "verdict", "whiteness"]
 
 #: the largest autocorrelation (lags 1 and 2) of the whitened residual a trusted run may show. Assumption
@@ -52,6 +55,13 @@ __all__ = ["ACF_LIMIT", "BIAS_LIMIT_SD", "CORRECTED_LIMIT_SD", "HETEROGENEITY_GR
 #: 90 % interval covering about 87 %. Measured (KVLCC2's MMG hull, central rows, 0.005 L/U0): 0.003-0.02 with 1 %
 #: white noise, -0.34 on noise-free records
 ACF_LIMIT = 0.1
+
+#: 1 - R^2 of an equation's rows below this: records without measurement noise. Assumption (labelled): measured
+#: records carry sensor noise far above it (a fibre-optic gyro's 0.01 deg/s on yaw rates of 1 deg/s is 1e-2 of the
+#: signal, and derivatives of the samples amplify it). Measured on the calibration models' central rows (KVLCC2's
+#: MMG hull, the waterjet USV): 2e-8 to 4e-5 noise-free at 0.005 L/U0, at least 1.4e-2 with 1 % noise (1.1e-3 at
+#: 0.05 L/U0, where noise-free rows reach 1.9e-3 from truncation alone, which checks 3 and 4 flag)
+NOISE_FREE_GAP = 1e-4
 
 #: the groups of rows (by the size of the fitted value) whose separately fitted coefficients :func:`heterogeneity`
 #: compares
@@ -256,6 +266,13 @@ def run_verdict(likelihood: str, structure_name: str, bias_sd: dict, dropped_dif
     refused = any(v == 0.0 for k, v in metrics.items() if k.startswith("est_") and k.endswith("_eiv_corrected"))
     trusted, note = verdict(bias_sd, structure_name, dropped_differences, corrected, min(rel) if rel else None,
                             refused)
+    gaps = [(k[len("fit_r2_"):], 1.0 - float(v)) for k, v in metrics.items()
+            if k.startswith("fit_r2_") and isinstance(v, (int, float)) and np.isfinite(v)]
+    if trusted and gaps and min(g for _, g in gaps) < NOISE_FREE_GAP:
+        eq, gap = min(gaps, key=lambda kv: kv[1])
+        return False, (f"{structure_name}: the rows of equation {eq} fit to within {gap:.1e} of their variance "
+                       f"(1 - R^2 below {NOISE_FREE_GAP:g}): the records carry no measurement noise the likelihood "
+                       "could model, and the intervals would measure numerical error: not calibrated (cannot tell)")
     white = whiteness(metrics)
     if trusted and white is not None and abs(white[2]) > ACF_LIMIT:
         eq, lag, v = white

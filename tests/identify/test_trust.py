@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from study.identify.trust import (ACF_LIMIT, HETEROGENEITY_P, OMITTED_TERMS_P, heterogeneity, omitted_terms, range_key,
+from study.identify.trust import (ACF_LIMIT, HETEROGENEITY_P, NOISE_FREE_GAP, OMITTED_TERMS_P, heterogeneity, omitted_terms, range_key,
                                   run_verdict, whiteness)
 
 
@@ -139,3 +139,13 @@ def test_a_run_whose_records_ask_for_a_term_is_flagged_naming_it():
 def test_the_omitted_terms_flag_is_the_test_level(tail, trusted):
     m = {"est_X_omitted_terms": 2.0, "est_X_omitted_terms_p": tail}
     assert run_verdict("regression", "central", {}, 0, True, m)[0] is trusted
+
+
+def test_rows_without_noise_are_not_trusted_whatever_their_residual_looks_like():
+    """Noise-free records: the rows fit to numerical error, which the intervals would measure; the note names the
+    equation. Rows with noise at the limit pass."""
+    m = {"fit_r2_X": 1 - 3e-6, "fit_r2_N": 0.98, "est_X_whitened_acf1": 0.01}
+    ok, note = run_verdict("regression", "central", {"K": 0.1}, 0, True, m)
+    assert not ok and "equation X fit to within 3.0e-06" in note and "cannot tell" in note
+    m["fit_r2_X"] = 1 - NOISE_FREE_GAP * 1.01
+    assert run_verdict("regression", "central", {"K": 0.1}, 0, True, m)[0]

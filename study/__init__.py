@@ -1,11 +1,12 @@
 """study: a reference harness for identifying ship manoeuvring models.
 
-The user's verbs, importable from the package (each imports what it needs when called, so ``import study`` is
-fast; ``study.api`` holds them):
+The user's verbs, importable from the package (each imports what it needs when called, so ``import
+study`` is fast; ``study.api`` holds them):
 
 - :func:`load_vessel`, :func:`load_records`, :func:`real_data_dir`: vessels and records;
 - :func:`simulate_maneuver`, :func:`measure_record`: a simulated record and its measurement;
-- :func:`identify_model`, :func:`predict`, :func:`replay_record`: identification and what the model predicts;
+- :func:`identify_model`, :func:`predict`, :func:`replay_record`: identification and what the model
+  predicts;
 - :func:`diagnose_records`: the model doctor;
 - :func:`read_results`: the results table; :func:`read_posterior`: an emcee run's posterior (ArviZ).
 """

@@ -1,9 +1,10 @@
 """The user's verbs: thin wrappers over the harness's own functions, offered by ``import study``.
 
-Each verb reads its configurations by name from ``conf/`` (the same names as on the command line: ``vessel=kvlcc2``
-is ``vessel="kvlcc2"``) and imports what it needs when it is called, so ``import study`` stays fast. The names pair
-a verb with its object (``simulate_maneuver``, ``identify_model``): the bare verbs are taken by the package's
-modules and commands (``study.identify``, ``study.records.measure``, ``python -m study simulate``, ``diagnose``).
+Each verb reads its configurations by name from ``conf/`` (the same names as on the command line:
+``vessel=kvlcc2`` is ``vessel="kvlcc2"``) and imports what it needs when it is called, so ``import
+study`` stays fast. The names pair a verb with its object (``simulate_maneuver``,
+``identify_model``): the bare verbs are taken by the package's modules and commands
+(``study.identify``, ``study.records.measure``, ``python -m study simulate``, ``diagnose``).
 
 =========================  ============================================================================
 verb                       what it wraps
@@ -43,7 +44,8 @@ def _vessel(vessel, effects=()):
 
 
 def _frame(record):
-    """The data of a record: a ``study.records.schema.Record`` or a DataFrame in the record schema."""
+    """The data of a record: a ``study.records.schema.Record`` or a DataFrame in the record
+    schema."""
     return record.data if hasattr(record, "data") and hasattr(record, "meta") else record
 
 
@@ -53,8 +55,8 @@ def load_vessel(name, effects=()):
     Parameters
     ----------
     name : str or dict
-        A vessel config name (``kvlcc2``, ``kvlcc2_l7``, ``kcs``, ``usv_waterjet``, ``mariner``, ``auv``,
-        ``kt_mariner``, ``kt1_mariner``, ``esso_osaka``) or a config dict.
+        A vessel config name (``kvlcc2``, ``kvlcc2_l7``, ``kcs``, ``usv_waterjet``, ``mariner``,
+        ``auv``, ``kt_mariner``, ``kt1_mariner``, ``esso_osaka``) or a config dict.
     effects : sequence
         Effects of the simulator (``study.sim.effects``) or their configs, e.g.
         ``[{"name": "current", "speed": 0.1, "direction_deg": 45}]``.
@@ -62,8 +64,8 @@ def load_vessel(name, effects=()):
     Returns
     -------
     study.sim.Vessel
-        With ``name``, ``kind_name``, ``L`` (length between perpendiculars, m), ``U0`` (approach speed, m/s) and
-        ``n0`` (propeller speed at U0, rps).
+        With ``name``, ``kind_name``, ``L`` (length between perpendiculars, m), ``U0`` (approach
+        speed, m/s) and ``n0`` (propeller speed at U0, rps).
 
     Examples
     --------
@@ -78,8 +80,9 @@ def load_vessel(name, effects=()):
 def load_records(spec, states: str = "measured", state_options: dict | None = None) -> list:
     """Records from files: a file, folder, glob, a comma-separated string of them, or a list.
 
-    Schema files (CSV or Parquet, ``docs/schema.md``) and the real datasets' own formats (HSVA's ``.dat``
-    files, Osaka University's Esso Osaka CSVs) are read and checked for the unit mistakes their channels give
+    Schema files (CSV or Parquet, ``docs/schema.md``) and the real datasets' own formats (HSVA's
+    ``.dat`` files, Osaka University's Esso Osaka CSVs) are read and checked for the unit mistakes
+    their channels give
     away.
 
     Parameters
@@ -87,9 +90,9 @@ def load_records(spec, states: str = "measured", state_options: dict | None = No
     spec : str, path or list
         What to read.
     states : {"measured", "auto", "ekf"}
-        Where u, v, r come from: the record (``measured``), estimated from positions and heading when the record
-        lacks them (``auto``), or always estimated, measured ones refined (``ekf``; extended Kalman filter and
-        Rauch-Tung-Striebel smoother).
+        Where u, v, r come from: the record (``measured``), estimated from positions and heading
+        when the record lacks them (``auto``), or always estimated, measured ones refined (``ekf``;
+        extended Kalman filter and Rauch-Tung-Striebel smoother).
     state_options : dict, optional
         The state estimator's options (``study.records.state_estimation``).
 
@@ -117,8 +120,8 @@ def load_records(spec, states: str = "measured", state_options: dict | None = No
 
 
 def real_data_dir():
-    """The folder of the measured records: ``$STUDY_REAL_DATA``, else the first ``shared/data/real`` beside the
-    checkout or a folder above it.
+    """The folder of the measured records: ``$STUDY_REAL_DATA``, else the first ``shared/data/real``
+    beside the checkout or a folder above it.
 
     Returns
     -------
@@ -152,15 +155,16 @@ def simulate_maneuver(vessel, maneuver, *, effects=(), duration: float | None = 
     duration : float, optional
         Seconds; default: the manoeuvre's own duration for this vessel.
     dt, sample_dt : float, optional
-        Integration step (default: about 1 % of L/U0, at most 0.1 s) and sampling interval (a multiple of it).
+        Integration step (default: about 1 % of L/U0, at most 0.1 s) and sampling interval (a
+        multiple of it).
     seed : int
         Seed of a random rudder sequence.
 
     Returns
     -------
     pandas.DataFrame
-        Columns ``time``, ``u``, ``v``, ``r``, ``x0``, ``y0``, ``psi``, ``delta``, ``n`` and the rest of the
-        simulator's outputs, SI units and radians (``docs/conventions.md``).
+        Columns ``time``, ``u``, ``v``, ``r``, ``x0``, ``y0``, ``psi``, ``delta``, ``n`` and the
+        rest of the simulator's outputs, SI units and radians (``docs/conventions.md``).
 
     Examples
     --------
@@ -186,8 +190,9 @@ def measure_record(record, noise: str | dict = "low", *, vessel=None, sample_dt:
     record : pandas.DataFrame or study.records.schema.Record
         A record in the schema, e.g. from :func:`simulate_maneuver`.
     noise : str or dict
-        A noise config of ``conf/noise/`` (``none``, ``low``, ``medium``, ``high``, ``low_relative``, ...;
-        ``docs/noise.md``) or its dict. The absolute ones choose their sensors by the vessel's scale.
+        A noise config of ``conf/noise/`` (``none``, ``low``, ``medium``, ``high``,
+        ``low_relative``, ...; ``docs/noise.md``) or its dict. The absolute ones choose their
+        sensors by the vessel's scale.
     vessel : str, study.sim.Vessel or Identified, optional
         Needed by absolute noise (full-scale or model-scale sensors) and by ``sample_dt_LU``.
     sample_dt : float, optional
@@ -227,14 +232,15 @@ class Identified:
     Attributes
     ----------
     estimates : dict
-        Physical parameter name -> estimate (Nomoto models: ``K``, ``T``, ``alpha``, ...; force models their
-        non-dimensional coefficients).
+        Physical parameter name -> estimate (Nomoto models: ``K``, ``T``, ``alpha``, ...; force
+        models their non-dimensional coefficients).
     params : pandas.DataFrame
-        One row per identified coefficient, the columns of ``params.parquet``: ``equation``, ``name``,
-        ``estimate``, ``truth`` (the vessel config's value), ``rel_error``, interval columns when the estimator
-        gives one.
+        One row per identified coefficient, the columns of ``params.parquet``: ``equation``,
+        ``name``, ``estimate``, ``truth`` (the vessel config's value), ``rel_error``, interval
+        columns when the estimator gives one.
     metrics : dict
-        The run's metrics (``m_*`` columns of ``runs.parquet`` without the prefix), e.g. ``drift_median``.
+        The run's metrics (``m_*`` columns of ``runs.parquet`` without the prefix), e.g.
+        ``drift_median``.
     vessel : study.sim.Vessel or None
         The model as a vessel to simulate (None when an estimate is not finite).
     model : object
@@ -254,24 +260,25 @@ class Identified:
 def identify_model(records, vessel, model: str | dict = "mmg_hull", structure: str | dict = "central",
                    estimator: str | dict = "ls", *, params: dict | None = None, seed: int = 0,
                    progress: bool = False) -> Identified:
-    """Identify a model from records with a sample structure and an estimator, as one run of ``python -m study``.
+    """Identify a model from records with a sample structure and an estimator, as one run of
+    ``python -m study``.
 
     Parameters
     ----------
     records : list of pandas.DataFrame or study.records.schema.Record
         Training records in the schema (measured, or from :func:`measure_record`).
     vessel : str, dict or study.sim.Vessel
-        The vessel whose known parts (mass, propeller, rudder) the model keeps; its coefficients are the
-        ``truth`` column (exact when the records were simulated from it).
+        The vessel whose known parts (mass, propeller, rudder) the model keeps; its coefficients are
+        the ``truth`` column (exact when the records were simulated from it).
     model : str or dict
-        What is identified: ``mmg_hull``, ``mmg_simplified``, ``usv_full``, ``abkowitz``, ``auv``, ``nomoto1``,
-        ``nomoto1_nl``, ``nomoto2``, ``nomoto2_nl`` (``conf/model/``).
+        What is identified: ``mmg_hull``, ``mmg_simplified``, ``usv_full``, ``abkowitz``, ``auv``,
+        ``nomoto1``, ``nomoto1_nl``, ``nomoto2``, ``nomoto2_nl`` (``conf/model/``).
     structure : str or dict
-        How records become samples: ``euler``, ``central``, ``integral``, ``smoothed``, ``diff_center``,
-        ``output_error`` (``conf/structure/``).
+        How records become samples: ``euler``, ``central``, ``integral``, ``smoothed``,
+        ``diff_center``, ``output_error`` (``conf/structure/``).
     estimator : str or dict
-        ``ls``, ``ridge``, ``lasso``, ``lssvm``, ``tlssvm``, ``lssvm_online``, ``svr_eps``, ``svr_nu``, ``sindy``,
-        ``de``, ``emcee``, ``map`` (``conf/estimator/``).
+        ``ls``, ``ridge``, ``lasso``, ``lssvm``, ``tlssvm``, ``lssvm_online``, ``svr_eps``,
+        ``svr_nu``, ``sindy``, ``de``, ``emcee``, ``map`` (``conf/estimator/``).
     params : dict, optional
         Hyper-parameters merged into the estimator's ``params`` (e.g. ``{"target_ess": 400}``).
     seed : int
@@ -286,12 +293,13 @@ def identify_model(records, vessel, model: str | dict = "mmg_hull", structure: s
     Raises
     ------
     ValueError
-        When the combination cannot run (e.g. a regression estimator on ``output_error``), with the reason.
+        When the combination cannot run (e.g. a regression estimator on ``output_error``), with the
+        reason.
 
     Examples
     --------
-    The first-order nonlinear Nomoto model of the Mariner (``kt1_mariner``: that model is its truth) from a
-    noise-free 10/10 zigzag, least squares on central differences:
+    The first-order nonlinear Nomoto model of the Mariner (``kt1_mariner``: that model is its truth)
+    from a noise-free 10/10 zigzag, least squares on central differences:
 
     >>> import study
     >>> rec = study.simulate_maneuver("kt1_mariner", "zigzag_10_10")
@@ -367,16 +375,16 @@ def predict(identified: Identified, maneuver, *, duration: float | None = None, 
 
 
 def replay_record(vessel, record, *, substeps: int = 1):
-    """Replay a model open loop through a record: its measured rudder (as the steering gear's command) and
-    propeller speed, from its first state.
+    """Replay a model open loop through a record: its measured rudder (as the steering gear's
+    command) and propeller speed, from its first state.
 
     Parameters
     ----------
     vessel : str, dict, study.sim.Vessel or Identified
         The model to replay.
     record : pandas.DataFrame or study.records.schema.Record
-        A uniformly sampled record with ``time``, ``u``, ``v``, ``r``, ``x0``, ``y0``, ``psi``, ``delta`` and
-        ``n`` (without ``n``: the vessel's ``n0``).
+        A uniformly sampled record with ``time``, ``u``, ``v``, ``r``, ``x0``, ``y0``, ``psi``,
+        ``delta`` and ``n`` (without ``n``: the vessel's ``n0``).
     substeps : int
         Integration steps per sampling interval.
 
@@ -410,29 +418,30 @@ def replay_record(vessel, record, *, substeps: int = 1):
 
 def diagnose_records(train, validate=None, *, vessel: str = "kvlcc2_l7", model: str = "known",
                      out="doctor_report", overwrite: bool = False, candidates=None, **settings) -> dict:
-    """The model doctor: where a model fails against measured records, and which physical effect is missing.
+    """The model doctor: where a model fails against measured records, and which physical effect is
+    missing.
 
-    The same as ``python -m study diagnose train=... validate=... vessel=... model=... out=...``: the report is
-    written to ``out`` (``report.json``, ``report.html``, ``figures/``) and returned as a dict. Its runs are not
-    logged in a results table unless ``log_runs=True`` is given.
+    The same as ``python -m study diagnose train=... validate=... vessel=... model=... out=...``:
+    the report is written to ``out`` (``report.json``, ``report.html``, ``figures/``) and returned
+    as a dict. Its runs are not logged in a results table unless ``log_runs=True`` is given.
 
     Parameters
     ----------
     train, validate : str or list
-        Record files: a file, folder, glob or a list (as :func:`load_records`); without ``validate`` each training
-        record is held out in turn.
+        Record files: a file, folder, glob or a list (as :func:`load_records`); without ``validate``
+        each training record is held out in turn.
     vessel : str
         The vessel config whose coefficients are the model (or its prior).
     model : str
-        ``known`` (the vessel config as it is) or a force model to identify (``mmg_hull``, ...), anchored to the
-        vessel config's coefficients (``anchor=0.3``).
+        ``known`` (the vessel config as it is) or a force model to identify (``mmg_hull``, ...),
+        anchored to the vessel config's coefficients (``anchor=0.3``).
     out : str or path
         The report folder; one holding a report is refused unless ``overwrite=True``.
     candidates : list of str, optional
         The candidate effects (``conf/effect/``); default: every one found.
     **settings
-        Any other key of ``conf/diagnose.yaml`` (``anchor``, ``min_improvement``, ``max_steps``, ``states``,
-        ``effect_path``, ...).
+        Any other key of ``conf/diagnose.yaml`` (``anchor``, ``min_improvement``, ``max_steps``,
+        ``states``, ``effect_path``, ...).
 
     Returns
     -------
@@ -441,7 +450,8 @@ def diagnose_records(train, validate=None, *, vessel: str = "kvlcc2_l7", model: 
 
     Examples
     --------
-    Two short records of the 7 m KVLCC2 with a hidden yaw bias, the doctor choosing between a yaw bias and a
+    Two short records of the 7 m KVLCC2 with a hidden yaw bias, the doctor choosing between a yaw
+    bias and a
     current:
 
     >>> import tempfile, pathlib
@@ -470,8 +480,8 @@ def diagnose_records(train, validate=None, *, vessel: str = "kvlcc2_l7", model: 
 
 
 def read_results(results_dir="results", table: str = "runs"):
-    """A table of the results store: ``runs`` (one row per run) or ``params`` (one row per identified
-    coefficient), safe to read while a sweep is writing.
+    """A table of the results store: ``runs`` (one row per run) or ``params`` (one row per
+    identified coefficient), safe to read while a sweep is writing.
 
     Parameters
     ----------
@@ -484,8 +494,9 @@ def read_results(results_dir="results", table: str = "runs"):
     Returns
     -------
     pandas.DataFrame
-        ``runs``: ``run_id``, ``status``, ``cfg_*`` (the configuration), ``m_*`` (metrics), ``t_*`` (timings);
-        ``params``: ``run_id``, ``equation``, ``name``, ``estimate``, ``truth``, ``rel_error``, ...
+        ``runs``: ``run_id``, ``status``, ``cfg_*`` (the configuration), ``m_*`` (metrics), ``t_*``
+        (timings); ``params``: ``run_id``, ``equation``, ``name``, ``estimate``, ``truth``,
+        ``rel_error``, ...
 
     Raises
     ------
@@ -519,10 +530,11 @@ def read_results(results_dir="results", table: str = "runs"):
 
 
 def read_posterior(results_dir, run_id: str):
-    """An emcee run's posterior as ArviZ ``InferenceData``: every equation's chain joined into one posterior
-    (``<equation>.<coefficient>``; walkers as chains, as ``arviz.from_emcee`` takes them), the log posterior in
-    ``sample_stats``, the run id in the attributes. ``arviz.summary(idata)`` gives r-hat and ESS;
-    ``idata.to_netcdf(path)`` writes it (``python -m study results posterior <run id> --out file.nc`` does both).
+    """An emcee run's posterior as ArviZ ``InferenceData``: every equation's chain joined into one
+    posterior (``<equation>.<coefficient>``; walkers as chains, as ``arviz.from_emcee`` takes them),
+    the log posterior in ``sample_stats``, the run id in the attributes. ``arviz.summary(idata)``
+    gives r-hat and ESS; ``idata.to_netcdf(path)`` writes it (``python -m study results posterior
+    <run id> --out file.nc`` does both).
 
     Parameters
     ----------

@@ -1,30 +1,36 @@
-"""A sweep job's configuration, as Hydra's launchers compose it, for less: what is the same for many jobs is done once.
+"""A sweep job's configuration, as Hydra's launchers compose it, for less: what is the same for many
+jobs is done once.
 
-Every Hydra launcher composes each job's configuration again in the worker (``ConfigLoader.load_sweep_config``:
-the primary config, its defaults list, every group option's YAML and Hydra's own config groups, then the job's
-overrides): 0.1 s of CPU a job on this project's configs, whatever the job. :class:`JobComposer` does two things
-once instead of every time, both exact:
+Every Hydra launcher composes each job's configuration again in the worker
+(``ConfigLoader.load_sweep_config``: the primary config, its defaults list, every group option's
+YAML and Hydra's own config groups, then the job's overrides): 0.1 s of CPU a job on this project's
+configs, whatever the job. :class:`JobComposer` does two things once instead of every time, both
+exact:
 
-* **Loaded configs** (``cache_loaded``): each config file (or structured config) Hydra loads -- read, parsed,
-  its defaults list built -- is kept per process, and every later load gets a fresh copy of it (an unpickling,
-  as if read again: Hydra is free to change what it gets). Hydra's composition is otherwise unchanged, and runs on
-  a copy of the config loader, so the launching process's own loader is untouched. About 40 % of a composition.
+* **Loaded configs** (``cache_loaded``): each config file (or structured config) Hydra loads --
+  read, parsed, its defaults list built -- is kept per process, and every later load gets a fresh
+  copy of it (an unpickling, as if read again: Hydra is free to change what it gets). Hydra's
+  composition is otherwise unchanged, and runs on a copy of the config loader, so the launching
+  process's own loader is untouched. About 40 % of a composition.
 * **Value overrides** (``share``): jobs that differ only in value overrides (``seed=3``,
-  ``noise.sample_dt_LU=0.05``, ``vessel.operation.U0=8.23``) share everything up to the last step of a
-  composition, so it is done once per distinct set of *group* overrides (``estimator=ls``) with Hydra's own
-  ``load_sweep_config``; for each job that configuration is copied and the job's value overrides are applied with
-  the call Hydra itself makes for them (``ConfigLoaderImpl._apply_overrides_to_config``), followed by Hydra's
-  bookkeeping of the overrides (``hydra.overrides.task``, ``hydra.job.override_dirname``) as
-  ``ConfigLoaderImpl._load_configuration_impl`` does it. Which overrides are group overrides is decided by Hydra's
-  own classification (``hydra._internal.defaults_list.Overrides``) against the same config repository. Why this is
-  the same configuration: Hydra's composition is ``defaults list (group overrides only) -> merge -> struct mode ->
-  value overrides in order -> bookkeeping``; value overrides never enter the defaults list or the merge, so the
-  state before them is a function of the group overrides alone. Anything else -- an override of ``hydra.*``, a
-  sweep-syntax value, a job without value overrides -- is composed by ``load_sweep_config`` itself.
+  ``noise.sample_dt_LU=0.05``, ``vessel.operation.U0=8.23``) share everything up to the last step of
+  a composition, so it is done once per distinct set of *group* overrides (``estimator=ls``) with
+  Hydra's own ``load_sweep_config``; for each job that configuration is copied and the job's value
+  overrides are applied with the call Hydra itself makes for them
+  (``ConfigLoaderImpl._apply_overrides_to_config``), followed by Hydra's bookkeeping of the
+  overrides (``hydra.overrides.task``, ``hydra.job.override_dirname``) as
+  ``ConfigLoaderImpl._load_configuration_impl`` does it. Which overrides are group overrides is
+  decided by Hydra's own classification (``hydra._internal.defaults_list.Overrides``) against the
+  same config repository. Why this is the same configuration: Hydra's composition is ``defaults list
+  (group overrides only) -> merge -> struct mode -> value overrides in order -> bookkeeping``; value
+  overrides never enter the defaults list or the merge, so the state before them is a function of
+  the group overrides alone. Anything else -- an override of ``hydra.*``, a sweep-syntax value, a
+  job without value overrides -- is composed by ``load_sweep_config`` itself.
 
-Hydra internals are used (private but pinned: hydra-core 1.3), and ``tests/plugins/test_launcher.py`` checks node by node
-(values, node types, flags, metadata) that the result equals Hydra's own composition, on a sample of grand's and
-seed001's jobs in the default test run and on every job of both with ``-m slow``.
+Hydra internals are used (private but pinned: hydra-core 1.3), and
+``tests/plugins/test_launcher.py`` checks node by node (values, node types, flags, metadata) that
+the result equals Hydra's own composition, on a sample of grand's and seed001's jobs in the default
+test run and on every job of both with ``-m slow``.
 """
 # no `from __future__ import annotations`: Hydra execs plugin modules outside sys.modules (see covering_sweeper)
 
@@ -70,8 +76,9 @@ class JobComposer:
             self.master.hydra.job.config_name, hydra_overrides)
 
     def split(self, overrides: Sequence[str]) -> Optional[Tuple[Tuple[str, ...], list, list]]:
-        """``(group override lines, value overrides, all parsed overrides)`` of a job, by Hydra's own
-        classification; None when the job is not composed from a shared base (see the module's docstring)."""
+        """``(group override lines, value overrides, all parsed overrides)`` of a job, by Hydra's
+        own classification; None when the job is not composed from a shared base (see the
+        module's docstring)."""
         from hydra._internal.defaults_list import Overrides
 
         if self._parser is None:
@@ -90,7 +97,8 @@ class JobComposer:
         return groups, values, parsed
 
     def group_key(self, overrides: Sequence[str]) -> Tuple[str, ...]:
-        """The jobs that can share a composition have the same key (the launchers group jobs by it)."""
+        """The jobs that can share a composition have the same key (the launchers group jobs by
+        it)."""
         if not self.share:
             return tuple(overrides)
         s = self.split(overrides)
@@ -103,8 +111,8 @@ class JobComposer:
         return self.loader.load_sweep_config(self.master, list(overrides))
 
     def compose(self, overrides: Sequence[str], alone: bool = False) -> DictConfig:
-        """The job's configuration, equal to :meth:`hydra_compose`'s. ``alone``: no other job to come shares its
-        group overrides (a base kept for it would cost its pickling for nothing)."""
+        """The job's configuration, equal to :meth:`hydra_compose`'s. ``alone``: no other job to
+        come shares its group overrides (a base kept for it would cost its pickling for nothing)."""
         s = self.split(overrides) if self.share and not alone else None
         if s is None:
             return self.hydra_compose(overrides)
@@ -122,8 +130,9 @@ class JobComposer:
         return self._apply(cfg, values, parsed)
 
     def _apply(self, cfg: DictConfig, values: list, parsed: list) -> DictConfig:
-        """Hydra's last steps of a composition (``ConfigLoaderImpl._load_configuration_impl`` after the merge,
-        and ``load_sweep_config``'s cache copy), on a configuration composed from the group overrides."""
+        """Hydra's last steps of a composition (``ConfigLoaderImpl._load_configuration_impl``
+        after the merge, and ``load_sweep_config``'s cache copy), on a configuration composed
+        from the group overrides."""
         from hydra._internal.config_loader_impl import ConfigLoaderImpl, get_overrides_dirname
         from hydra.errors import ConfigCompositionException
         from omegaconf.errors import OmegaConfBaseException
@@ -146,10 +155,11 @@ class JobComposer:
 
 
 class _Frozen:
-    """An object (a configuration, Hydra's result of loading one) kept as a pickle, copied by unpickling it (1-2 ms; OmegaConf's deepcopy costs ten times
-    that). Classes and functions (structured configs' types) are kept by identity, not by name: Hydra re-executes
-    plugin modules when it rebuilds its plugin registry (``Singleton.set_state`` in a worker), after which a
-    class found by its name is another object than the one the configuration holds."""
+    """An object (a configuration, Hydra's result of loading one) kept as a pickle, copied by
+    unpickling it (1-2 ms; OmegaConf's deepcopy costs ten times that). Classes and functions
+    (structured configs' types) are kept by identity, not by name: Hydra re-executes plugin
+    modules when it rebuilds its plugin registry (``Singleton.set_state`` in a worker), after
+    which a class found by its name is another object than the one the configuration holds."""
 
     def __init__(self, cfg) -> None:
         self.objects: list = []
@@ -172,10 +182,11 @@ class _Frozen:
 
 
 class _LoadedConfigs(IConfigRepository):
-    """Hydra's config repository with every loaded config kept (per search path and config path) and handed out
-    as a fresh copy. Hydra copies its repository for every composition (``CachingConfigRepository`` deep-copies
-    it, so that a ``hydra.searchpath`` can re-initialise the copy's sources): the copy shares the kept configs, and
-    the wrapped repository is copied shallowly (re-initialising its sources rebinds its list, never changes a
+    """Hydra's config repository with every loaded config kept (per search path and config path) and
+    handed out as a fresh copy. Hydra copies its repository for every composition
+    (``CachingConfigRepository`` deep-copies it, so that a ``hydra.searchpath`` can re-initialise
+    the copy's sources): the copy shares the kept configs, and the wrapped repository is copied
+    shallowly (re-initialising its sources rebinds its list, never changes a
     source)."""
 
     def __init__(self, inner, kept: dict, counts: Optional[dict] = None) -> None:
@@ -219,9 +230,10 @@ class _LoadedConfigs(IConfigRepository):
 
 
 def config_differences(a, b, path: str = "", out: Optional[List[str]] = None, limit: int = 20) -> List[str]:
-    """Where two OmegaConf trees differ, node by node: node class, metadata (reference and object types,
-    optional, key, flags, resolver cache, key and element types), and raw values (interpolations unresolved).
-    Empty when they are the same configuration. Used by the tests against Hydra's own composition."""
+    """Where two OmegaConf trees differ, node by node: node class, metadata (reference and object
+    types, optional, key, flags, resolver cache, key and element types), and raw values
+    (interpolations unresolved). Empty when they are the same configuration. Used by the tests
+    against Hydra's own composition."""
     from omegaconf import ListConfig, Node
     from omegaconf.basecontainer import BaseContainer
 

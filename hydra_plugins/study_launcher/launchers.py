@@ -1,18 +1,22 @@
-"""The project's Hydra launchers: a sweep's jobs run in long-lived worker processes that each receive the sweep once.
+"""The project's Hydra launchers: a sweep's jobs run in long-lived worker processes that each
+receive the sweep once.
 
-* ``study_local`` (``hydra/launcher=local``): one machine, ``n_jobs`` worker processes (loky, as Hydra's joblib
-  launcher), jobs handed over in chunks (``runner.run_jobs``).
-* ``study_slurm`` (``hydra/launcher=slurm_grouped``): a SLURM job array through submitit, as Hydra's submitit
-  launcher, but each array task runs a group of jobs (``jobs_per_task``) with ``cpus_per_task`` worker processes,
-  so that a node pays Python's start, the imports and the compiled code once per worker instead of once per run.
+* ``study_local`` (``hydra/launcher=local``): one machine, ``n_jobs`` worker processes (loky, as
+  Hydra's joblib launcher), jobs handed over in chunks (``runner.run_jobs``).
+* ``study_slurm`` (``hydra/launcher=slurm_grouped``): a SLURM job array through submitit, as Hydra's
+  submitit launcher, but each array task runs a group of jobs (``jobs_per_task``) with
+  ``cpus_per_task`` worker processes, so that a node pays Python's start, the imports and the
+  compiled code once per worker instead of once per run.
 
-Why (``benchmarks/bench_sweep.py --part launcher``, README "Where the time goes"): Hydra's joblib launcher sends the
-sweep's whole context with every job and re-installs it in the worker (its plugin registry rebuilt by a scan of
-every plugin module each time), and composes every job's configuration from scratch; the submitit launcher starts
-one Python process per run. Per job these launchers do only what a job needs (``runner``, ``compose``), with the
-same results: each job's configuration equal to Hydra's own composition, Hydra's ``run_job`` (output folder,
-logging, callbacks, JobReturn), the JobReturns in the jobs' order. Hydra only loads launchers from the
-``hydra_plugins`` namespace package, hence this package (registered by hand by ``study.commands.app``, as the sweeper).
+Why (``benchmarks/bench_sweep.py --part launcher``, README "Where the time goes"): Hydra's joblib
+launcher sends the sweep's whole context with every job and re-installs it in the worker (its plugin
+registry rebuilt by a scan of every plugin module each time), and composes every job's configuration
+from scratch; the submitit launcher starts one Python process per run. Per job these launchers do
+only what a job needs (``runner``, ``compose``), with the same results: each job's configuration
+equal to Hydra's own composition, Hydra's ``run_job`` (output folder, logging, callbacks,
+JobReturn), the JobReturns in the jobs' order. Hydra only loads launchers from the ``hydra_plugins``
+namespace package, hence this package (registered by hand by ``study.commands.app``, as the
+sweeper).
 """
 # no `from __future__ import annotations`: Hydra execs plugin modules outside sys.modules (see covering_sweeper)
 
@@ -60,7 +64,8 @@ class _StudyLauncher(Launcher):
         self.task_function = task_function
 
     def _begin(self, job_overrides: Sequence[Sequence[str]], initial_job_idx: int, what: str) -> List[Any]:
-        """The parent's part of every launcher: logging as configured, the sweep folder, the jobs listed."""
+        """The parent's part of every launcher: logging as configured, the sweep folder, the jobs
+        listed."""
         from hydra.core.utils import configure_log, filter_overrides, setup_globals
 
         setup_globals()
@@ -96,7 +101,8 @@ class StudyLocalLauncher(_StudyLauncher):
 
 
 class TaskRunner:
-    """One SLURM array task: its group of jobs, with ``workers`` worker processes on the task's CPUs."""
+    """One SLURM array task: its group of jobs, with ``workers`` worker processes on the task's
+    CPUs."""
 
     def __init__(self, context: bytes, workers: int) -> None:
         self.context = context
@@ -116,8 +122,8 @@ class TaskRunner:
 
 
 def task_groups(jobs: List[Any], key, n_tasks: int) -> List[List[Any]]:
-    """``jobs`` in ``n_tasks`` consecutive groups of near-equal size (sizes differ by one at most), after a stable
-    sort by ``key`` so that jobs sharing a composition share a task."""
+    """``jobs`` in ``n_tasks`` consecutive groups of near-equal size (sizes differ by one at
+    most), after a stable sort by ``key`` so that jobs sharing a composition share a task."""
     order = {}
     for _, overrides in jobs:
         order.setdefault(key(overrides), len(order))
@@ -149,7 +155,8 @@ class StudySlurmLauncher(_StudyLauncher):
                              "jobs per array task, or null (spread the jobs over array_parallelism tasks)")
 
     def _executor(self):
-        """submitit's executor, set up as Hydra's submitit launcher sets it up (its parameter names)."""
+        """submitit's executor, set up as Hydra's submitit launcher sets it up (its parameter
+        names)."""
         import submitit
         from hydra_plugins.hydra_submitit_launcher.config import BaseQueueConf
         from omegaconf import OmegaConf

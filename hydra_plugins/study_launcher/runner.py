@@ -1,19 +1,21 @@
-"""Running a sweep's jobs: what each job needs and no more, in this process or in a pool of worker processes.
+"""Running a sweep's jobs: what each job needs and no more, in this process or in a pool of worker
+processes.
 
-Per job: its configuration (:class:`~hydra_plugins.study_launcher.compose.JobComposer`: Hydra's composition, shared
-between jobs that differ only in value overrides), ``hydra.job.num`` and ``hydra.job.id`` set as Hydra's joblib
-launcher sets them, and Hydra's own ``run_job`` (the job's output folder, its logging, ``hydra.output_subdir``,
-``hydra.job.chdir`` and ``env_set``, the callbacks' ``on_job_start``/``on_job_end``, the task function, and its
-``JobReturn``: a task that raises is a FAILED JobReturn carrying the exception, as with every Hydra launcher).
+Per job: its configuration (:class:`~hydra_plugins.study_launcher.compose.JobComposer`: Hydra's
+composition, shared between jobs that differ only in value overrides), ``hydra.job.num`` and
+``hydra.job.id`` set as Hydra's joblib launcher sets them, and Hydra's own ``run_job`` (the job's
+output folder, its logging, ``hydra.output_subdir``, ``hydra.job.chdir`` and ``env_set``, the
+callbacks' ``on_job_start``/``on_job_end``, the task function, and its ``JobReturn``: a task that
+raises is a FAILED JobReturn carrying the exception, as with every Hydra launcher).
 
-Per worker process, once: the sweep's context (Hydra's context with the callbacks, the sweep's configuration, the
-task function, Hydra's singleton state), unpickled and installed. Hydra's joblib launcher sends all of it with
-every job and re-installs it in the worker for every job, which rebuilds Hydra's plugin registry (a scan of every
-plugin module: ``Singleton.set_state``) each time.
+Per worker process, once: the sweep's context (Hydra's context with the callbacks, the sweep's
+configuration, the task function, Hydra's singleton state), unpickled and installed. Hydra's joblib
+launcher sends all of it with every job and re-installs it in the worker for every job, which
+rebuilds Hydra's plugin registry (a scan of every plugin module: ``Singleton.set_state``) each time.
 
-Jobs are handed to the workers in chunks of jobs with the same group overrides (so a worker composes their
-configuration once), at most ``1/(4 x workers)`` of the jobs in a chunk so that the load stays balanced; results
-come back in the jobs' order whatever order they ran in.
+Jobs are handed to the workers in chunks of jobs with the same group overrides (so a worker composes
+their configuration once), at most ``1/(4 x workers)`` of the jobs in a chunk so that the load stays
+balanced; results come back in the jobs' order whatever order they ran in.
 """
 # no `from __future__ import annotations`: Hydra execs plugin modules outside sys.modules (see covering_sweeper)
 
@@ -49,8 +51,9 @@ _WORKER: Dict[str, Any] = {}  # this process's installed context and composer
 
 
 def install(context, in_process: bool = False) -> None:
-    """Make ``context`` (a :class:`SweepContext` or its pickle) this process's sweep. A worker process also takes
-    Hydra's singleton state (config store, resolvers) from it; the launching process has it already."""
+    """Make ``context`` (a :class:`SweepContext` or its pickle) this process's sweep. A worker
+    process also takes Hydra's singleton state (config store, resolvers) from it; the launching
+    process has it already."""
     import pickle
 
     from hydra.core.utils import setup_globals
@@ -74,8 +77,8 @@ def composer():
 
 
 def run_one(num: int, overrides: Sequence[str], alone: bool = False):
-    """One job in this process (its context installed): compose, number, run with Hydra's ``run_job``.
-    ``alone``: no other job of its chunk shares its group overrides."""
+    """One job in this process (its context installed): compose, number, run with Hydra's
+    ``run_job``. ``alone``: no other job of its chunk shares its group overrides."""
     from hydra.core.hydra_config import HydraConfig
     from hydra.core.utils import run_job
     from omegaconf import open_dict
@@ -99,8 +102,9 @@ def run_chunk(chunk: Sequence[Job]) -> list:
 
 def make_chunks(jobs: Sequence[Job], key: Callable[[Sequence[str]], Any], workers: int,
                 per_worker: int = 4) -> List[List[Job]]:
-    """The jobs grouped by ``key`` (jobs of one group stay together, groups in order of first appearance), each
-    group cut into chunks of at most ``ceil(len(jobs) / (per_worker x workers))`` jobs: every job in exactly one
+    """The jobs grouped by ``key`` (jobs of one group stay together, groups in order of first
+    appearance), each group cut into chunks of at most ``ceil(len(jobs) / (per_worker x workers))``
+    jobs: every job in exactly one
     chunk."""
     cap = max(1, math.ceil(len(jobs) / (per_worker * max(1, workers))))
     groups: Dict[Any, List[Job]] = {}
@@ -110,10 +114,11 @@ def make_chunks(jobs: Sequence[Job], key: Callable[[Sequence[str]], Any], worker
 
 
 def die_with_parent(parent: int) -> None:
-    """Make this worker process end when ``parent`` (the launcher) ends, however it ends: a SIGKILLed launcher
-    left its workers computing and then idle until they were killed by hand. On Linux the kernel sends SIGKILL
-    at the parent's death (``prctl(PR_SET_PDEATHSIG)``); everywhere a daemon thread checks once a second whether
-    the worker has been handed to another parent, and ends it then."""
+    """Make this worker process end when ``parent`` (the launcher) ends, however it ends: a
+    SIGKILLed launcher left its workers computing and then idle until they were killed by hand.
+    On Linux the kernel sends SIGKILL at the parent's death (``prctl(PR_SET_PDEATHSIG)``);
+    everywhere a daemon thread checks once a second whether the worker has been handed to another
+    parent, and ends it then."""
     import os
     import threading
     import time
@@ -145,8 +150,8 @@ def _worker_start(parent: int, context: bytes) -> None:
 
 
 def worker_count(n_jobs: int) -> int:
-    """Workers for ``n_jobs`` as joblib reads it: -1 every CPU this process may use (cgroup quotas and affinity
-    counted, loky's cpu_count), -2 all but one, and so on."""
+    """Workers for ``n_jobs`` as joblib reads it: -1 every CPU this process may use (cgroup
+    quotas and affinity counted, loky's cpu_count), -2 all but one, and so on."""
     from joblib.externals.loky import cpu_count
 
     if n_jobs is None or n_jobs == 0:
@@ -157,8 +162,9 @@ def worker_count(n_jobs: int) -> int:
 
 
 def run_jobs(context: SweepContext, jobs: Sequence[Job], workers: int, installed: bool = False) -> list:
-    """Run ``jobs`` with ``workers`` processes (one: in this process, as Hydra's basic launcher does) and return
-    their JobReturns in the jobs' order. ``installed``: this process has the context already (a SLURM task)."""
+    """Run ``jobs`` with ``workers`` processes (one: in this process, as Hydra's basic launcher
+    does) and return their JobReturns in the jobs' order. ``installed``: this process has the
+    context already (a SLURM task)."""
     if workers <= 1 or len(jobs) <= 1:
         if not installed:
             install(context, in_process=True)

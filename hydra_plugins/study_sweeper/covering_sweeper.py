@@ -1,19 +1,21 @@
 """Hydra's basic sweeper, checking a covering subset of the sweep's configs before launching.
 
 Why a plugin: Hydra's BasicSweeper composes *every* job's config before launching anything, to catch
-composition errors early ("This can be a bit slow for large jobs", its own comment), and the launcher composes
-each one again. At about 0.2 s a config, the 1188-job `grand` study spent 4 minutes composing before its
-first job on two cores. This sweeper composes only enough jobs that every swept value (every
-`key=value` of the sweep) appears in at least one composed config: a misspelt group option, a bad value or
-an unknown key still fails before any job runs, in about 25 compositions instead of 1188. An error that only
-a particular combination of values would raise surfaces when the launcher composes that job; the runs that
-finished before it stay in the results table and the next start resumes them. `validate_all: true` restores
-Hydra's behaviour. Hydra only loads sweepers from the `hydra_plugins` namespace package, hence this module.
+composition errors early ("This can be a bit slow for large jobs", its own comment), and the
+launcher composes each one again. At about 0.2 s a config, the 1188-job `grand` study spent 4
+minutes composing before its first job on two cores. This sweeper composes only enough jobs that
+every swept value (every `key=value` of the sweep) appears in at least one composed config: a
+misspelt group option, a bad value or an unknown key still fails before any job runs, in about 25
+compositions instead of 1188. An error that only a particular combination of values would raise
+surfaces when the launcher composes that job; the runs that finished before it stay in the results
+table and the next start resumes them. `validate_all: true` restores Hydra's behaviour. Hydra only
+loads sweepers from the `hydra_plugins` namespace package, hence this module.
 
-Each composed config is also checked by the study's own rules (`study.run.settings.check_run`: zero, negative or
-non-finite values, unknown estimator hyper-parameters), so such a sweep is refused before any job runs. The
-sweep's number of jobs is exported (`STUDY_SWEEP_JOBS`) for the progress lines (`job 12/66`), and when the
-sweep ends `study.configuration.sweep_summary.sweep_finished` counts its jobs by status (a failed run makes the command's exit status
+Each composed config is also checked by the study's own rules (`study.run.settings.check_run`: zero,
+negative or non-finite values, unknown estimator hyper-parameters), so such a sweep is refused
+before any job runs. The sweep's number of jobs is exported (`STUDY_SWEEP_JOBS`) for the progress
+lines (`job 12/66`), and when the sweep ends `study.configuration.sweep_summary.sweep_finished`
+counts its jobs by status (a failed run makes the command's exit status
 non-zero).
 """
 # no `from __future__ import annotations`: Hydra execs plugin modules outside sys.modules, and dataclasses
@@ -43,9 +45,9 @@ ConfigStore.instance().store(group="hydra/sweeper", name="covering", node=Coveri
 
 
 def covering_jobs(batch: Sequence[Sequence[str]]) -> list[Sequence[str]]:
-    """A subset of the jobs in which every override string of the batch appears at least once (one greedy
-    pass: a job is kept when it brings an override not seen yet; for a cartesian sweep that is about the sum of
-    the numbers of values, not their product)."""
+    """A subset of the jobs in which every override string of the batch appears at least once
+    (one greedy pass: a job is kept when it brings an override not seen yet; for a cartesian
+    sweep that is about the sum of the numbers of values, not their product)."""
     seen: set[str] = set()
     keep = []
     for job in batch:

@@ -1,9 +1,9 @@
 """The commands: ``python -m study [command] [arguments]``.
 
-Without a command word, ``python -m study`` is the Hydra app (:mod:`study.commands.app`: one run, or a sweep with
-``-m``). Every other module of this package is a command of its own name (``python -m study diagnose ...``); each
-defines ``command()``, which runs it on ``sys.argv`` and exits with its status. A new command is one module here,
-found without being listed.
+Without a command word, ``python -m study`` is the Hydra app (:mod:`study.commands.app`: one run, or
+a sweep with ``-m``). Every other module of this package is a command of its own name (``python -m
+study diagnose ...``); each defines ``command()``, which runs it on ``sys.argv`` and exits with its
+status. A new command is one module here, found without being listed.
 """
 from __future__ import annotations
 
@@ -21,8 +21,9 @@ def names() -> list[str]:
 
 
 def dispatch(argv: list[str]) -> None:
-    """Run the command ``argv[1]`` names (removed from ``sys.argv``), or the Hydra app when ``argv[1]`` is an
-    override, an option or absent. A bare word that is neither a command nor an override is refused in one line."""
+    """Run the command ``argv[1]`` names (removed from ``sys.argv``), or the Hydra app when
+    ``argv[1]`` is an override, an option or absent. A bare word that is neither a command nor an
+    override is refused in one line."""
     word = argv[1] if len(argv) > 1 else ""
     if word in names():
         sys.argv = [f"{argv[0]} {word}"] + argv[2:]

@@ -1,11 +1,13 @@
 """The Hydra app: ``python -m study`` runs one run, ``python -m study -m a=1,2 b=x,y`` sweeps;
-``python -m study train=<files> [validate=<files>] ...`` runs on the user's own records (``study.run.records_run``).
+``python -m study train=<files> [validate=<files>] ...`` runs on the user's own records
+(``study.run.records_run``).
 
-Each job resolves its configuration, hands it to the results store (which skips a run already finished by the
-current code, leaves a run that another live process is computing to it in a sweep and waits for it in a single
-run, records a failure without stopping the sweep, and writes the record atomically), and the table
-``results/runs.parquet`` + ``results/params.parquet`` is rebuilt when the run or the sweep ends. A results folder
-that cannot be written is refused before the first job (exit status 2), and a failed rebuild exits with status 1.
+Each job resolves its configuration, hands it to the results store (which skips a run already
+finished by the current code, leaves a run that another live process is computing to it in a sweep
+and waits for it in a single run, records a failure without stopping the sweep, and writes the
+record atomically), and the table ``results/runs.parquet`` + ``results/params.parquet`` is rebuilt
+when the run or the sweep ends. A results folder that cannot be written is refused before the first
+job (exit status 2), and a failed rebuild exits with status 1.
 """
 from __future__ import annotations
 
@@ -27,11 +29,11 @@ CONF_DIR = str(config.CONF_DIR)  # Hydra's config_path
 
 
 def _register_plugins() -> None:
-    """conf/config.yaml uses hydra_plugins/study_sweeper (Hydra's basic sweeper composing only a covering
-    subset of the jobs up front), conf/hydra/launcher/ hydra_plugins/study_launcher (the launchers running a
-    sweep's jobs in long-lived workers). Hydra finds plugins by scanning the `hydra_plugins` namespace, which a
-    setuptools editable install (`pip install -e .`) hides from the scan, so they are registered by hand here,
-    before any config is composed."""
+    """conf/config.yaml uses hydra_plugins/study_sweeper (Hydra's basic sweeper composing only a
+    covering subset of the jobs up front), conf/hydra/launcher/ hydra_plugins/study_launcher (the
+    launchers running a sweep's jobs in long-lived workers). Hydra finds plugins by scanning the
+    `hydra_plugins` namespace, which a setuptools editable install (`pip install -e .`) hides
+    from the scan, so they are registered by hand here, before any config is composed."""
     from hydra.core.plugins import Plugins
 
     plugins = Plugins.instance()  # first: its scan re-executes Hydra's core plugin modules, BasicSweeper's too
@@ -50,12 +52,13 @@ def _results_dir(cfg: DictConfig) -> Path:
 
 
 def precheck(overrides: list, multirun: bool) -> None:
-    """Every check of ``python -m study``, on the configuration composed from the command line, before Hydra
-    makes its output folder (``<results_dir>/logs/...``) or anything else: the classes the
-    configuration names, in Hydra's own node too (callbacks, launcher, sweeper: the trusted-code boundary), the
-    settings (``study.run.settings.check_run``: values, enumerated settings, settings that must fit together), the
-    results folder writable, and a run's records read and checked against the vessel. A sweep's jobs are
-    checked by the sweeper, before it writes anything."""
+    """Every check of ``python -m study``, on the configuration composed from the command line,
+    before Hydra makes its output folder (``<results_dir>/logs/...``) or anything else: the
+    classes the configuration names, in Hydra's own node too (callbacks, launcher, sweeper: the
+    trusted-code boundary), the settings (``study.run.settings.check_run``: values, enumerated
+    settings, settings that must fit together), the results folder writable, and a run's records
+    read and checked against the vessel. A sweep's jobs are checked by the sweeper, before it
+    writes anything."""
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
     from study.configuration.cli import ConfigError
@@ -86,8 +89,9 @@ def precheck(overrides: list, multirun: bool) -> None:
 
 
 class CollectResults(Callback):
-    """Refuse a results folder that cannot be written before the first job; bring the results table up to date
-    at the end of a run or of a whole sweep (a failure to do so exits with status 1, the records intact)."""
+    """Refuse a results folder that cannot be written before the first job; bring the results
+    table up to date at the end of a run or of a whole sweep (a failure to do so exits with
+    status 1, the records intact)."""
 
     def _check(self, config: DictConfig) -> None:
         from study.store import ResultsFolderError, ResultStore
@@ -148,7 +152,8 @@ _STORES: dict = {}  # results folder -> its store in this worker process (it rem
 
 
 def _folder_counts(root: Path) -> dict:
-    """Runs in the results folder by status (``ResultStore.status_counts``: each record read once per worker)."""
+    """Runs in the results folder by status (``ResultStore.status_counts``: each record read once
+    per worker)."""
     from study.store import ResultStore
 
     store = _STORES.get(root)
@@ -158,9 +163,10 @@ def _folder_counts(root: Path) -> dict:
 
 
 class SweepProgress(Callback):
-    """One line per finished job of a sweep: its number out of the sweep's total, status (a skipped run's reason)
-    and time, and how many runs the results folder holds by status (Hydra itself lists the jobs when it launches
-    them). Works with any launcher: the line is printed by the job's own process."""
+    """One line per finished job of a sweep: its number out of the sweep's total, status (a
+    skipped run's reason) and time, and how many runs the results folder holds by status (Hydra
+    itself lists the jobs when it launches them). Works with any launcher: the line is printed by
+    the job's own process."""
 
     def on_job_end(self, config: DictConfig, job_return, **kwargs) -> None:
         from hydra.core.hydra_config import HydraConfig
@@ -207,10 +213,11 @@ def main(cfg: DictConfig) -> dict | None:
 
 
 def distinct_datasets(conf: dict, n: int) -> int:
-    """How many of ``n`` replicates are distinct datasets: one when nothing in the configuration draws at random
-    (no measurement noise, no coloured noise, outliers or dropouts, no random-rudder manoeuvre), since every
-    replicate would then be the same records and counting them as independent evidence would be false; else ``n``.
-    An estimator's own randomness (differential evolution's population) is no new dataset."""
+    """How many of ``n`` replicates are distinct datasets: one when nothing in the configuration
+    draws at random (no measurement noise, no coloured noise, outliers or dropouts, no
+    random-rudder manoeuvre), since every replicate would then be the same records and counting
+    them as independent evidence would be false; else ``n``. An estimator's own randomness
+    (differential evolution's population) is no new dataset."""
     if n <= 1 or conf.get("train"):
         return n
     from study.sim.maneuvers import get_maneuver
@@ -282,9 +289,10 @@ def _say_run(record: dict, store) -> None:
 
 
 def _key_numbers(records: list, root: Path, on_records: bool = False, drawn: bool = True) -> str:
-    """What a run found, in two lines: its median coefficient error, the held-out prediction error of each
-    validation manoeuvre's heading and the time (medians and the range over datasets for replicates), and the next
-    command to try (more datasets only where they would differ: ``drawn``)."""
+    """What a run found, in two lines: its median coefficient error, the held-out prediction
+    error of each validation manoeuvre's heading and the time (medians and the range over
+    datasets for replicates), and the next command to try (more datasets only where they would
+    differ: ``drawn``)."""
     import numpy as np
 
     ok = [r for r in records if r.get("status") == "ok"]
@@ -323,7 +331,8 @@ def _key_numbers(records: list, root: Path, on_records: bool = False, drawn: boo
 
 
 def _job_summary(records: list) -> dict:
-    """What a job of many replicates returns to the sweep: its worst status, counts by status, total time."""
+    """What a job of many replicates returns to the sweep: its worst status, counts by status,
+    total time."""
     counts: dict = {}
     for r in records:
         counts[r.get("status", "?")] = counts.get(r.get("status", "?"), 0) + 1

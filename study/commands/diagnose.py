@@ -1,11 +1,13 @@
-"""``python -m study diagnose train=<file|folder|glob> [validate=...] vessel=<v> model=<m> out=<dir>``.
+"""``python -m study diagnose train=<file|folder|glob> [validate=...] vessel=<v> model=<m>
+out=<dir>``.
 
-The model doctor (``study.doctor``): compares a model with measured records, shows where it fails, ranks the
-candidate missing effects by out-of-sample improvement, adds them one after the other, and writes
-``<out>/report.html`` (self-contained), ``<out>/report.json`` and ``<out>/figures/``; prints a short verdict.
-Options in ``conf/diagnose.yaml``. Records: the schema's CSV/Parquet files (``python -m study simulate``
-makes them), HSVA's KVLCC2 ``.dat`` files and the Esso Osaka CSVs of ``../shared/data/real`` (read in place).
-This module is the command line only: the doctor run from a resolved configuration is ``study.doctor.run.run``.
+The model doctor (``study.doctor``): compares a model with measured records, shows where it fails,
+ranks the candidate missing effects by out-of-sample improvement, adds them one after the other, and
+writes ``<out>/report.html`` (self-contained), ``<out>/report.json`` and ``<out>/figures/``; prints
+a short verdict. Options in ``conf/diagnose.yaml``. Records: the schema's CSV/Parquet files
+(``python -m study simulate`` makes them), HSVA's KVLCC2 ``.dat`` files and the Esso Osaka CSVs of
+``../shared/data/real`` (read in place). This module is the command line only: the doctor run from a
+resolved configuration is ``study.doctor.run.run``.
 """
 from __future__ import annotations
 
@@ -46,10 +48,10 @@ def _main(conf: dict) -> None:
 
 
 def precheck(overrides: list, multirun: bool) -> None:
-    """The doctor's settings checks on its composed configuration, before Hydra starts: the settings, the
-    classes the configuration and the effect folders name (before anything is imported), ``out=`` and the
-    results folder writable. The records are read and checked against the vessel by the run, before it makes
-    the report folder."""
+    """The doctor's settings checks on its composed configuration, before Hydra starts: the
+    settings, the classes the configuration and the effect folders name (before anything is
+    imported), ``out=`` and the results folder writable. The records are read and checked against
+    the vessel by the run, before it makes the report folder."""
     from study.configuration.compose import check_targets, compose
     from study.run.settings import check_diagnose
 

@@ -1,5 +1,5 @@
-"""``python -m study doctor_examples``: the doctor's worked examples, rebuilt into ``paper_figs/doctor/``
-(:func:`study.doctor.examples.main`; ``--help`` lists the options)."""
+"""``python -m study doctor_examples``: the doctor's worked examples, rebuilt into
+``paper_figs/doctor/`` (:func:`study.doctor.examples.main`; ``--help`` lists the options)."""
 from study.configuration.cli import run
 from study.doctor.examples import main
 

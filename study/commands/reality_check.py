@@ -1,16 +1,17 @@
-"""KVLCC2 against reality: the MMG model of ``kvlcc2_l7`` through the zigzags HSVA ran free (SIMMAN 2008).
+"""KVLCC2 against reality: the MMG model of ``kvlcc2_l7`` through the zigzags HSVA ran free (SIMMAN
+2008).
 
-``python -m study reality_check`` simulates the 10/10 and 20/10 zigzags, both sides first, from the measured
-approach speed, with the published MMG coefficients (Yasukawa & Yoshimura 2015) and the helm rate of the HSVA
-report, and puts overshoots and periods beside the measured ones in ``<out>/kvlcc2_zigzags_vs_tank.{csv,md}``
-and ``<out>/kvlcc2_zigzags_vs_tank.{png,pdf}`` (default ``reality_check/`` in the current folder; the committed
-ones: ``--out paper_figs --overwrite``).
+``python -m study reality_check`` simulates the 10/10 and 20/10 zigzags, both sides first, from the
+measured approach speed, with the published MMG coefficients (Yasukawa & Yoshimura 2015) and the
+helm rate of the HSVA report, and puts overshoots and periods beside the measured ones in
+``<out>/kvlcc2_zigzags_vs_tank.{csv,md}`` and ``<out>/kvlcc2_zigzags_vs_tank.{png,pdf}`` (default
+``reality_check/`` in the current folder; the committed ones: ``--out paper_figs --overwrite``).
 
-Two propeller settings are simulated, because they are the two defensible readings of "the HSVA test":
-``mmg_self_propulsion`` (n solved so that the MMG model runs straight at the measured speed: the model is
-self-consistent) and ``hsva_rpm`` (the measured 10.23 rps: the MMG model's resistance and thrust then decide
-the speed, as in the tank). Measured data: HSVA (A. Cura Hochbaum) 2006, redistributed by Alexandersson et al.
-(2022); see ../shared/data/real/kvlcc2_hsva/SOURCE.md.
+Two propeller settings are simulated, because they are the two defensible readings of "the HSVA
+test": ``mmg_self_propulsion`` (n solved so that the MMG model runs straight at the measured speed:
+the model is self-consistent) and ``hsva_rpm`` (the measured 10.23 rps: the MMG model's resistance
+and thrust then decide the speed, as in the tank). Measured data: HSVA (A. Cura Hochbaum) 2006,
+redistributed by Alexandersson et al. (2022); see ../shared/data/real/kvlcc2_hsva/SOURCE.md.
 """
 from __future__ import annotations
 
@@ -55,7 +56,8 @@ def simulate_like(measured: pd.DataFrame, amp_deg: float, switch_deg: float, pro
 
 
 def vessel_at(vessel, u0: float, n: float | None):
-    """The vessel with its operating point moved to the measured approach speed (and, optionally, rpm)."""
+    """The vessel with its operating point moved to the measured approach speed (and, optionally,
+    rpm)."""
     from study.sim import get_kind
 
     kind = get_kind(vessel.kind_name)

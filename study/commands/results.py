@@ -1,8 +1,8 @@
-"""``python -m study results {rebuild,show}``: the results folder from the command line (the store itself is
-``study.store``; its folder and columns are described in ``results/README.md``).
+"""``python -m study results {rebuild,show}``: the results folder from the command line (the store
+itself is ``study.store``; its folder and columns are described in ``results/README.md``).
 
-``rebuild`` remakes ``runs.parquet`` and ``params.parquet`` from the records; ``show`` counts the runs by status
-and lists the last ten, without writing anything.
+``rebuild`` remakes ``runs.parquet`` and ``params.parquet`` from the records; ``show`` counts the
+runs by status and lists the last ten, without writing anything.
 """
 from __future__ import annotations
 
@@ -28,7 +28,8 @@ def _say(store: ResultStore, stream=None) -> None:
 
 
 def _posterior(store: ResultStore, run_id: str, out: str | None) -> int:
-    """An emcee run's chains as one ArviZ InferenceData: r-hat and ESS printed, the netCDF file written."""
+    """An emcee run's chains as one ArviZ InferenceData: r-hat and ESS printed, the netCDF file
+    written."""
     from pathlib import Path
 
     from study.identify.posterior import diagnostics, inference_data, run_chains
@@ -55,7 +56,8 @@ def _posterior(store: ResultStore, run_id: str, out: str | None) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m study results {rebuild,show,posterior} [--root results]``; exit status 1 on an error."""
+    """``python -m study results {rebuild,show,posterior} [--root results]``; exit status 1 on an
+    error."""
     ap = argparse.ArgumentParser(prog="python -m study results", description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     for name, help_ in (("rebuild", "rebuild runs.parquet and params.parquet from the records"),

@@ -1,8 +1,9 @@
-"""``python -m study simulate vessel=<v> maneuver=<m> out=<file>``: write one simulated, measured record.
+"""``python -m study simulate vessel=<v> maneuver=<m> out=<file>``: write one simulated, measured
+record.
 
-Effects (depth, environment) and noise are Hydra overrides (see ``conf/simulate.yaml``). The record's
-metadata names the vessel, the manoeuvre, the effects that were applied (so a test can know the hidden
-truth) and the noise.
+Effects (depth, environment) and noise are Hydra overrides (see ``conf/simulate.yaml``). The
+record's metadata names the vessel, the manoeuvre, the effects that were applied (so a test can know
+the hidden truth) and the noise.
 """
 from __future__ import annotations
 
@@ -17,7 +18,8 @@ from study.configuration.cli import reported, run_hydra
 
 
 def make_record(conf: dict):
-    """Simulate and measure one manoeuvre from a resolved simulate config; returns a schema Record."""
+    """Simulate and measure one manoeuvre from a resolved simulate config; returns a schema
+    Record."""
     from study.sim import maneuvers as man_mod
     from study.run.pipeline import measurement, vessels_for
     from study.records.schema import Record
@@ -78,9 +80,9 @@ def _write(conf: dict) -> None:
 
 
 def precheck(overrides: list, multirun: bool) -> None:
-    """Every check of ``python -m study simulate`` on its composed configuration, before Hydra starts and
-    before anything is simulated: the settings, the classes the configuration names, ``out=`` (given, a record
-    file, not there, its folder writable)."""
+    """Every check of ``python -m study simulate`` on its composed configuration, before Hydra
+    starts and before anything is simulated: the settings, the classes the configuration names,
+    ``out=`` (given, a record file, not there, its folder writable)."""
     from study.configuration.compose import check_targets, compose
     from study.run.settings import check_simulate
 

@@ -1,17 +1,19 @@
-"""How every command-line entry point reports a problem: one line, an exit status, a traceback only when asked.
+"""How every command-line entry point reports a problem: one line, an exit status, a traceback only
+when asked.
 
-Every ``python -m study [command]`` runs through :func:`run` (argparse commands) or :func:`run_hydra` (the
-Hydra apps: ``study`` itself, ``simulate``, ``diagnose``). A problem the user can fix -- a setting, a file, an
-output that exists -- is printed as one line on stderr, ``<command>: error: <what, where, what was expected>``,
-and the command exits with status 2 (:data:`EXIT_USAGE`; nothing has been written). Anything else (a bug, a failed
-run) exits with status 1 (:data:`EXIT_FAILED`), also with one line, and a hint how to see the traceback:
-``--verbose`` on the command line or ``STUDY_VERBOSE=1`` in the environment (``HYDRA_FULL_ERROR=1`` as well, for
-Hydra's users).
+Every ``python -m study [command]`` runs through :func:`run` (argparse commands) or
+:func:`run_hydra` (the Hydra apps: ``study`` itself, ``simulate``, ``diagnose``). A problem the user
+can fix -- a setting, a file, an output that exists -- is printed as one line on stderr,
+``<command>: error: <what, where, what was expected>``, and the command exits with status 2
+(:data:`EXIT_USAGE`; nothing has been written). Anything else (a bug, a failed run) exits with
+status 1 (:data:`EXIT_FAILED`), also with one line, and a hint how to see the traceback:
+``--verbose`` on the command line or ``STUDY_VERBOSE=1`` in the environment (``HYDRA_FULL_ERROR=1``
+as well, for Hydra's users).
 
-Why not Hydra's own reporting: Hydra prints 15-40 lines of traceback with the message at the bottom. The Hydra
-apps therefore run with ``HYDRA_FULL_ERROR=1`` set here, which makes Hydra re-raise instead of printing, and
-errors inside a task are caught by :func:`reported`, which records the exit status and lets Hydra finish (its
-callbacks still rebuild the results table).
+Why not Hydra's own reporting: Hydra prints 15-40 lines of traceback with the message at the bottom.
+The Hydra apps therefore run with ``HYDRA_FULL_ERROR=1`` set here, which makes Hydra re-raise
+instead of printing, and errors inside a task are caught by :func:`reported`, which records the exit
+status and lets Hydra finish (its callbacks still rebuild the results table).
 """
 from __future__ import annotations
 
@@ -34,12 +36,13 @@ class UsageError(Exception):
 
 
 class ConfigError(UsageError, ValueError):
-    """A setting whose value makes no sense (zero, negative, not finite, unknown name, required but missing).
-    The message names the setting, the value given and what is expected."""
+    """A setting whose value makes no sense (zero, negative, not finite, unknown name, required
+    but missing). The message names the setting, the value given and what is expected."""
 
 
 class OutputExistsError(UsageError, FileExistsError):
-    """An output would replace a file or report already there (pass the command's overwrite option)."""
+    """An output would replace a file or report already there (pass the command's overwrite
+    option)."""
 
 
 #: the exit status a task asked for (set by :func:`reported` and :func:`fail`; read by :func:`run_hydra`), and the
@@ -48,20 +51,23 @@ _status = {"code": EXIT_OK, "refused_dir": None}
 
 
 def fail(code: int) -> None:
-    """Make the command exit with ``code`` (the worst one asked for wins) once Hydra has finished."""
+    """Make the command exit with ``code`` (the worst one asked for wins) once Hydra has
+    finished."""
     _status["code"] = max(_status["code"], int(code))
 
 
 def verbose() -> bool:
-    """Tracebacks wanted: ``--verbose`` was given (it sets ``STUDY_VERBOSE=1``), or ``STUDY_VERBOSE`` is set."""
+    """Tracebacks wanted: ``--verbose`` was given (it sets ``STUDY_VERBOSE=1``), or
+    ``STUDY_VERBOSE`` is set."""
     return os.environ.get(VERBOSE_ENV, "").strip().lower() in ("1", "true", "yes", "on")
 
 
 def _user_errors() -> tuple:
-    """Exception types that are the user's to fix: the project's own (``UsageError``; ``ValueError`` is the
-    project's convention for a bad value, and ``SchemaError``, ``RecordsInputError``, ``RecordCheckError`` derive
-    from it), files (``OSError``: missing, existing, not writable), and Hydra's and OmegaConf's configuration
-    errors (a misspelt option, an unknown key, a missing mandatory value)."""
+    """Exception types that are the user's to fix: the project's own (``UsageError``;
+    ``ValueError`` is the project's convention for a bad value, and ``SchemaError``,
+    ``RecordsInputError``, ``RecordCheckError`` derive from it), files (``OSError``: missing,
+    existing, not writable), and Hydra's and OmegaConf's configuration errors (a misspelt option,
+    an unknown key, a missing mandatory value)."""
     types = [UsageError, ValueError, OSError]
     try:
         from hydra.errors import HydraException
@@ -74,8 +80,8 @@ def _user_errors() -> tuple:
 
 
 def message(exc: BaseException) -> str:
-    """One line: the exception's message with its lines joined (Hydra's list their options on lines of their
-    own); an OS error as ``<file>: <reason>``."""
+    """One line: the exception's message with its lines joined (Hydra's list their options on
+    lines of their own); an OS error as ``<file>: <reason>``."""
     if isinstance(exc, OSError) and exc.strerror and exc.filename and not isinstance(exc, UsageError):
         text = f"{exc.filename}: {exc.strerror}"
     else:
@@ -104,9 +110,10 @@ _MISSING_OPTION = re.compile(r"Could not find '([^'/]+)/([^']+)'")
 
 
 def did_you_mean(exc: BaseException) -> str | None:
-    """For a misspelt setting or option, one line naming it and the closest names there are, instead of Hydra's
-    advice to add ``+key`` (which would add the misspelt key as a new one): from the configuration node OmegaConf
-    attaches to its error (a key) or the options Hydra lists (a group's option). None for any other error."""
+    """For a misspelt setting or option, one line naming it and the closest names there are,
+    instead of Hydra's advice to add ``+key`` (which would add the misspelt key as a new one):
+    from the configuration node OmegaConf attaches to its error (a key) or the options Hydra
+    lists (a group's option). None for any other error."""
     import difflib
 
     text = str(exc)
@@ -137,7 +144,8 @@ def did_you_mean(exc: BaseException) -> str | None:
 
 
 def report(exc: BaseException, prog: str) -> int:
-    """Print ``exc`` for the user (the traceback too when :func:`verbose`); returns the exit status."""
+    """Print ``exc`` for the user (the traceback too when :func:`verbose`); returns the exit
+    status."""
     if verbose():
         traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
     if isinstance(exc, _user_errors()):
@@ -150,8 +158,9 @@ def report(exc: BaseException, prog: str) -> int:
 
 @contextlib.contextmanager
 def reported(prog: str):
-    """Inside a Hydra task: an exception is printed in one line and becomes the command's exit status, and the
-    task returns normally (so Hydra runs its end-of-run callbacks and prints nothing of its own)."""
+    """Inside a Hydra task: an exception is printed in one line and becomes the command's exit
+    status, and the task returns normally (so Hydra runs its end-of-run callbacks and prints
+    nothing of its own)."""
     try:
         yield
     except (KeyboardInterrupt, SystemExit):
@@ -177,9 +186,10 @@ def _hydra_output_dir() -> str | None:
 
 
 def _remove_refused_output(path: str | None, started: float) -> None:
-    """A refusal writes nothing: the output folder Hydra made for a task that was then refused (its ``.hydra/``
-    and job log) is removed, with the parents it made (empty folders made since the command started). A folder
-    holding anything else, or the launch folder itself, is left alone."""
+    """A refusal writes nothing: the output folder Hydra made for a task that was then refused
+    (its ``.hydra/`` and job log) is removed, with the parents it made (empty folders made since
+    the command started). A folder holding anything else, or the launch folder itself, is left
+    alone."""
     import shutil
     from pathlib import Path
 
@@ -205,7 +215,8 @@ def _remove_refused_output(path: str | None, started: float) -> None:
 
 
 def _take_verbose(argv: list) -> bool:
-    """Remove ``--verbose`` from ``argv`` (in place: Hydra's parser does not know it); True if it was there."""
+    """Remove ``--verbose`` from ``argv`` (in place: Hydra's parser does not know it); True if it
+    was there."""
     found = VERBOSE_FLAG in argv
     argv[:] = [a for a in argv if a != VERBOSE_FLAG]
     return found
@@ -229,8 +240,9 @@ _HYDRA_VALUE_FLAGS = ("--config-path", "-cp", "--config-name", "-cn", "--config-
 
 
 def overrides_of(argv: list) -> tuple[list, bool] | None:
-    """``(overrides, multirun)`` of a Hydra command line, or None when it asks for something other than a run
-    (``--help``, ``--cfg``, ``--info``, a shell completion, another config): those are Hydra's to answer."""
+    """``(overrides, multirun)`` of a Hydra command line, or None when it asks for something
+    other than a run (``--help``, ``--cfg``, ``--info``, a shell completion, another config):
+    those are Hydra's to answer."""
     over, multirun = [], False
     for a in argv:
         if a in ("-m", "--multirun"):
@@ -243,8 +255,9 @@ def overrides_of(argv: list) -> tuple[list, bool] | None:
 
 
 def check_overrides(overrides: list) -> None:
-    """Each override parses (``key=value``); one that does not is refused naming it, with what was expected
-    (Hydra's own message is a parser exception's name: an unquoted path with spaces, a stray word)."""
+    """Each override parses (``key=value``); one that does not is refused naming it, with what
+    was expected (Hydra's own message is a parser exception's name: an unquoted path with spaces,
+    a stray word)."""
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
     parser = OverridesParser.create()
@@ -264,13 +277,14 @@ def check_overrides(overrides: list) -> None:
 def run_hydra(hydra_main, prog: str, precheck=None):
     """Run a ``@hydra.main`` function as a command with one-line errors; exits the process.
 
-    ``--verbose`` is taken off the command line (and exported as ``STUDY_VERBOSE=1``, so jobs in other processes
-    see it too). ``HYDRA_FULL_ERROR=1`` makes Hydra re-raise what it would print as a traceback (a configuration
-    that does not compose, an error in a sweep's job); it is reported here in one line.
+    ``--verbose`` is taken off the command line (and exported as ``STUDY_VERBOSE=1``, so jobs in
+    other processes see it too). ``HYDRA_FULL_ERROR=1`` makes Hydra re-raise what it would print as
+    a traceback (a configuration that does not compose, an error in a sweep's job); it is reported
+    here in one line.
 
-    ``precheck(overrides, multirun)``, the command's checks of its composed configuration, runs before Hydra
-    makes any folder or file: a refusal there writes nothing. A task refused later (status 2) has the output
-    folder Hydra made for it removed again.
+    ``precheck(overrides, multirun)``, the command's checks of its composed configuration, runs
+    before Hydra makes any folder or file: a refusal there writes nothing. A task refused later
+    (status 2) has the output folder Hydra made for it removed again.
     """
     import time
 
@@ -294,7 +308,8 @@ def run_hydra(hydra_main, prog: str, precheck=None):
 
 
 def _guarded(fn, prog: str):
-    """``fn()`` with every exception reported in one line and turned into the process's exit status."""
+    """``fn()`` with every exception reported in one line and turned into the process's exit
+    status."""
     try:
         return fn()
     except BrokenPipeError:  # the reader went away (``| head``): no message, as other Unix tools
@@ -310,15 +325,16 @@ def _guarded(fn, prog: str):
 
 
 def parser(prog: str, description: str, **kw) -> argparse.ArgumentParser:
-    """An argument parser whose ``--help`` lists ``--verbose`` (which :func:`run` takes off the command line)."""
+    """An argument parser whose ``--help`` lists ``--verbose`` (which :func:`run` takes off the
+    command line)."""
     ap = argparse.ArgumentParser(prog=f"python -m {prog}", description=description, **kw)
     ap.add_argument(VERBOSE_FLAG, action="store_true", help=f"print the traceback of an error (or {VERBOSE_ENV}=1)")
     return ap
 
 
 def _one_line_usage(prog: str):
-    """argparse's ``error`` as the other refusals: one line, ``<command>: error: <what>``, exit status 2 (argparse
-    prints a usage block of several lines first)."""
+    """argparse's ``error`` as the other refusals: one line, ``<command>: error: <what>``, exit
+    status 2 (argparse prints a usage block of several lines first)."""
     def error(self, msg):
         sub = self.prog.split()[3:] if self.prog.startswith("python -m ") else []  # a subcommand's parser
         where = " ".join([prog, *sub])
@@ -329,7 +345,8 @@ def _one_line_usage(prog: str):
 
 
 def run(main, prog: str, argv: list | None = None):
-    """Run an argparse command ``main(argv) -> exit status`` with one-line errors; exits the process."""
+    """Run an argparse command ``main(argv) -> exit status`` with one-line errors; exits the
+    process."""
     args = list(sys.argv[1:] if argv is None else argv)
     if _take_verbose(args):
         os.environ[VERBOSE_ENV] = "1"

@@ -1,11 +1,12 @@
-"""The configuration folder ``conf/``: reading, listing and composing its groups (the bottom layer: every
-component reads its YAML here, nothing here imports another module of the package).
+"""The configuration folder ``conf/``: reading, listing and composing its groups (the bottom layer:
+every component reads its YAML here, nothing here imports another module of the package).
 
-``read_config(group, name)`` reads ``conf/<group>/<name>.yaml`` as a plain dict (outside Hydra: the simulator's
-manoeuvres and vessels, models, structures, estimators, tests); ``list_configs(group)`` names a group's options;
-``compose(config_name, overrides)`` composes a command's configuration as Hydra does for it (the doctor's
-examples); ``simulated_studies()`` names the studies the experiments define; ``check_target`` and
-``check_targets`` are the trusted-code boundary: which classes a configuration may name.
+``read_config(group, name)`` reads ``conf/<group>/<name>.yaml`` as a plain dict (outside Hydra: the
+simulator's manoeuvres and vessels, models, structures, estimators, tests); ``list_configs(group)``
+names a group's options; ``compose(config_name, overrides)`` composes a command's configuration as
+Hydra does for it (the doctor's examples); ``simulated_studies()`` names the studies the experiments
+define; ``check_target`` and ``check_targets`` are the trusted-code boundary: which classes a
+configuration may name.
 """
 from __future__ import annotations
 
@@ -18,7 +19,8 @@ CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
 
 
 def read_config(group: str, name: str) -> dict:
-    """Read ``conf/<group>/<name>.yaml`` as a plain dict (outside Hydra: tests, the simulate CLI)."""
+    """Read ``conf/<group>/<name>.yaml`` as a plain dict (outside Hydra: tests, the simulate
+    CLI)."""
     path = CONF_DIR / group / f"{name}.yaml"
     if not path.exists():
         known = sorted(p.stem for p in (CONF_DIR / group).glob("*.yaml"))
@@ -43,18 +45,20 @@ LOGGING_PREFIXES = ("logging.", "colorlog.")
 
 
 class UntrustedCodeError(ValueError):
-    """A configuration names code outside the trusted packages and plugin folders (refused before any import)."""
+    """A configuration names code outside the trusted packages and plugin folders (refused before
+    any import)."""
 
 
 def check_target(target, where: str = "_target_", plugin_dirs=(), extra_prefixes=()) -> None:
-    """Refuse ``target`` (a ``_target_``: a dotted class path) unless it lies in the project's packages
-    (:data:`TRUSTED_PACKAGES`, :data:`TRUSTED_PREFIXES`) or in one of ``plugin_dirs`` (the effect folders the
-    user names). Nothing is imported or run to decide: a module outside the packages is only located
-    (``importlib.util.find_spec`` of its top-level name, which finds a file without executing it).
+    """Refuse ``target`` (a ``_target_``: a dotted class path) unless it lies in the project's
+    packages (:data:`TRUSTED_PACKAGES`, :data:`TRUSTED_PREFIXES`) or in one of ``plugin_dirs`` (the
+    effect folders the user names). Nothing is imported or run to decide: a module outside the
+    packages is only located (``importlib.util.find_spec`` of its top-level name, which finds a file
+    without executing it).
 
-    A configuration that could name any importable callable would run any code (``shutil.copyfile``,
-    ``builtins.open``): configuration folders and plugin folders are code and must be trusted, and everything
-    else is refused here."""
+    A configuration that could name any importable callable would run any code
+    (``shutil.copyfile``, ``builtins.open``): configuration folders and plugin folders are code
+    and must be trusted, and everything else is refused here."""
     import importlib.util
 
     expect = ("expected a class of the project's packages (" + ", ".join(f"{p}." for p in TRUSTED_PACKAGES)
@@ -81,8 +85,9 @@ def check_target(target, where: str = "_target_", plugin_dirs=(), extra_prefixes
 
 
 def check_targets(node, where: str = "", plugin_dirs=()) -> None:
-    """:func:`check_target` on every ``_target_`` in a configuration (dicts and lists, the ``hydra`` node too:
-    callbacks, launcher, sweeper), and on the factories of its logging configurations (``()``, ``class``)."""
+    """:func:`check_target` on every ``_target_`` in a configuration (dicts and lists, the
+    ``hydra`` node too: callbacks, launcher, sweeper), and on the factories of its logging
+    configurations (``()``, ``class``)."""
     if isinstance(node, dict):
         logging_ = where.split(".")[-1] in ("job_logging", "hydra_logging") or ".job_logging." in where + "." \
             or ".hydra_logging." in where + "."
@@ -98,8 +103,9 @@ def check_targets(node, where: str = "", plugin_dirs=()) -> None:
 
 
 def compose(config_name: str, overrides=(), hydra: bool = False) -> dict:
-    """The configuration ``conf/<config_name>.yaml`` composed with ``overrides`` as its command composes it,
-    resolved to plain dicts and lists; with ``hydra``, Hydra's own node too (unresolved)."""
+    """The configuration ``conf/<config_name>.yaml`` composed with ``overrides`` as its command
+    composes it, resolved to plain dicts and lists; with ``hydra``, Hydra's own node too
+    (unresolved)."""
     from hydra import compose as hydra_compose
     from hydra import initialize_config_dir
     from omegaconf import OmegaConf
@@ -115,8 +121,9 @@ def compose(config_name: str, overrides=(), hydra: bool = False) -> dict:
 
 
 def simulated_studies() -> set[str]:
-    """The named simulated studies: the ``study`` each experiment (``conf/experiment/<name>.yaml``) sets. Each has
-    its figures and claim in ``study/figures/studies/<name>.py`` (``tests/figures/test_figures.py`` checks the two sets
+    """The named simulated studies: the ``study`` each experiment
+    (``conf/experiment/<name>.yaml``) sets. Each has its figures and claim in
+    ``study/figures/studies/<name>.py`` (``tests/figures/test_figures.py`` checks the two sets
     are the same)."""
     out = set()
     for name in list_configs("experiment"):

@@ -1,8 +1,9 @@
 """How a sweep ends: one line counting its jobs by status, and the command's exit status.
 
-Called by the project's sweeper (``hydra_plugins/study_sweeper``) with every job's return; here, below the app
-that registers the sweeper, so that the sweeper never imports the app (no import cycle), and outside every run's
-code fingerprint (a run's result does not depend on how its sweep is summarised)."""
+Called by the project's sweeper (``hydra_plugins/study_sweeper``) with every job's return; here,
+below the app that registers the sweeper, so that the sweeper never imports the app (no import
+cycle), and outside every run's code fingerprint (a run's result does not depend on how its sweep
+is summarised)."""
 from __future__ import annotations
 
 from study.configuration.cli import EXIT_FAILED, fail
@@ -11,8 +12,9 @@ __all__ = ["sweep_finished"]
 
 
 def sweep_finished(returns: list) -> None:
-    """After a sweep (called by the sweeper with every job's return): one line counting the jobs by status, and
-    a non-zero exit status when a run failed or a job ended in an error (each was reported when it happened)."""
+    """After a sweep (called by the sweeper with every job's return): one line counting the jobs
+    by status, and a non-zero exit status when a run failed or a job ended in an error (each was
+    reported when it happened)."""
     counts: dict = {}
     for r in returns:
         st = r.get("status", "?") if isinstance(r, dict) else "error"

@@ -1,7 +1,8 @@
-"""The doctor's decision rule (steps 3 and 4 of ``study.doctor.diagnose``): a candidate's per-record validation
-errors against its base's -- the improvement of the mean, the paired test when there are enough records,
-significance -- and the verdict over the candidates: the best significant one, or a tie the records cannot
-settle. Also the doctor's options and one evaluation's errors."""
+"""The doctor's decision rule (steps 3 and 4 of ``study.doctor.diagnose``): a candidate's
+per-record validation errors against its base's -- the improvement of the mean, the paired test
+when there are enough records, significance -- and the verdict over the candidates: the best
+significant one, or a tie the records cannot settle. Also the doctor's options and one
+evaluation's errors."""
 from __future__ import annotations
 
 import math
@@ -61,9 +62,9 @@ def mean_on(ev: Evaluation, records: list) -> float:
 
 
 def compare(base: np.ndarray, cand: np.ndarray, opt: Options) -> dict:
-    """The decision rule for one candidate against its base, from per-record validation errors: improvement of
-    the mean, the paired test when there are enough records, significance. Diverged (inf) errors on either side
-    make no comparison."""
+    """The decision rule for one candidate against its base, from per-record validation errors:
+    improvement of the mean, the paired test when there are enough records, significance.
+    Diverged (inf) errors on either side make no comparison."""
     out = {"improvement": None, "p_value": None, "significant": False, "diverged": False}
     if not (np.all(np.isfinite(base)) and np.all(np.isfinite(cand))):
         out["diverged"] = bool(not np.all(np.isfinite(cand)))
@@ -84,7 +85,8 @@ def compare(base: np.ndarray, cand: np.ndarray, opt: Options) -> dict:
 
 
 def decide(base: Evaluation, cands: dict, opt: Options, records=None) -> tuple:
-    """(named effect or None, ambiguous pair or [], rows sorted best first) on the given validation records."""
+    """(named effect or None, ambiguous pair or [], rows sorted best first) on the given
+    validation records."""
     records = list(records) if records is not None else list(base.errors)
     if not records:  # nothing to score: the rows still show each candidate (every comparison void)
         records = list(base.errors)

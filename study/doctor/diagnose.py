@@ -1,35 +1,41 @@
-"""The diagnosis: baseline, candidate effects ranked by out-of-sample improvement, the error ladder, the verdict.
+"""The diagnosis: baseline, candidate effects ranked by out-of-sample improvement, the error ladder,
+the verdict.
 
-1. **Baseline**: the model (with the effects the user already added) identified on the training records and
-   replayed through the validation records (or, with no validation records, each record held out in turn).
-2. **Candidates**: each effect of the catalogue (``conf/effect``, plus the user's) not in the model is added,
-   the model re-identified on the training records, and replayed through the validation records. Its
-   *improvement* is the relative fall of the validation error (the mean over records of the mean NRMSE of u,
-   v, r, psi; NRMSE: RMSE over the measured channel's standard deviation, or a floor of 2 % of U0, of U0/L and
-   0.02 rad when the channel hardly varies).
-3. **Significance** (parsimony): a candidate is significant when the validation error falls by at least
-   ``min_improvement`` (default 10 %) -- out-of-sample, so an effect that only fits noise earns nothing -- and,
-   with three validation records or more, the per-record errors fall consistently (one-sided paired t-test
-   on the log errors, p < ``alpha``). With fewer records the report says the test was not possible.
-4. **Verdict**: the best significant candidate is the missing effect, unless the next significant one is within
-   ``tie`` (default 10 %) of its validation error: then the data cannot tell them apart, and the report says so
-   (``missing_effect`` null, ``ambiguous`` the pair). Each verdict is repeated with each validation record left
-   out and reported as "named in k of n"; a named effect that removes less than half of the validation error
-   (``decision.EXPLAINS_MOST``) is said to explain it in part: it may stand in for a cause no candidate models.
-5. **Ladder**: the missing effect is added (its parameters refined on the training replays), the remaining
-   candidates ranked again on top of it, and so on while a significant one remains. A step whose validation
-   error, refined, is not at least ``min_improvement`` lower than the step before is rejected: the ladder stops
-   and says why.
-6. **The place** (``study.records.facility``): a candidate that needs what the training records' facility lacks (wind
-   indoors, a current in still water) is not tried; a fitted candidate that is physically implausible there (a
-   pond's current faster than the wind's drift) is rejected with the reason and never significant.
-7. **Set-up effects** (an effect whose class says ``setup_effect``: a yaw bias, a rudder zero offset) belong to
-   the set-up the training records were measured in: they are left out of the prediction of a record measured in
-   another facility or at another scale (``study.records.facility.other_setup``) unless ``keep_setup_effects``; the report
-   says which were left out, and of which records.
-8. **Divergence**: a replay that leaves the physical envelope (``fit.ENVELOPE``) or overflows is *diverged*:
-   it has no error to compare. A diverged baseline gets a headline of its own and no missing effect; a
-   diverged candidate is never significant.
+1. **Baseline**: the model (with the effects the user already added) identified on the training
+   records and replayed through the validation records (or, with no validation records, each record
+   held out in turn).
+2. **Candidates**: each effect of the catalogue (``conf/effect``, plus the user's) not in the model
+   is added, the model re-identified on the training records, and replayed through the validation
+   records. Its *improvement* is the relative fall of the validation error (the mean over records of
+   the mean NRMSE of u, v, r, psi; NRMSE: RMSE over the measured channel's standard deviation, or a
+   floor of 2 % of U0, of U0/L and 0.02 rad when the channel hardly varies).
+3. **Significance** (parsimony): a candidate is significant when the validation error falls by at
+   least ``min_improvement`` (default 10 %) -- out-of-sample, so an effect that only fits noise
+   earns nothing -- and, with three validation records or more, the per-record errors fall
+   consistently (one-sided paired t-test on the log errors, p < ``alpha``). With fewer records the
+   report says the test was not possible.
+4. **Verdict**: the best significant candidate is the missing effect, unless the next significant
+   one is within ``tie`` (default 10 %) of its validation error: then the data cannot tell them
+   apart, and the report says so (``missing_effect`` null, ``ambiguous`` the pair). Each verdict is
+   repeated with each validation record left out and reported as "named in k of n"; a named effect
+   that removes less than half of the validation error (``decision.EXPLAINS_MOST``) is said to
+   explain it in part: it may stand in for a cause no candidate models.
+5. **Ladder**: the missing effect is added (its parameters refined on the training replays), the
+   remaining candidates ranked again on top of it, and so on while a significant one remains. A step
+   whose validation error, refined, is not at least ``min_improvement`` lower than the step before
+   is rejected: the ladder stops and says why.
+6. **The place** (``study.records.facility``): a candidate that needs what the training records'
+   facility lacks (wind indoors, a current in still water) is not tried; a fitted candidate that is
+   physically implausible there (a pond's current faster than the wind's drift) is rejected with the
+   reason and never significant.
+7. **Set-up effects** (an effect whose class says ``setup_effect``: a yaw bias, a rudder zero
+   offset) belong to the set-up the training records were measured in: they are left out of the
+   prediction of a record measured in another facility or at another scale
+   (``study.records.facility.other_setup``) unless ``keep_setup_effects``; the report says which
+   were left out, and of which records.
+8. **Divergence**: a replay that leaves the physical envelope (``fit.ENVELOPE``) or overflows is
+   *diverged*: it has no error to compare. A diverged baseline gets a headline of its own and no
+   missing effect; a diverged candidate is never significant.
 """
 from __future__ import annotations
 
@@ -117,8 +123,9 @@ class Doctor:
 
     # ------------------------------------------------------------------------------------------ evaluate
     def evaluate(self, effects, start=None, fixed=(), refine=False) -> Evaluation:
-        """Identify with ``effects`` and measure the validation error. ``fixed``: outer parameters kept at their
-        ``start`` values; ``refine``: polish the outer parameters on the training replay error (the ladder's
+        """Identify with ``effects`` and measure the validation error. ``fixed``: outer parameters
+        kept at their ``start`` values; ``refine``: polish the outer parameters on the training
+        replay error (the ladder's
         steps)."""
         effects = self.key(effects)
         key = (effects, bool(fixed), refine)
@@ -143,9 +150,10 @@ class Doctor:
         return ev
 
     def setup_left_out(self, fit: Fit, name: str, fold: int | None = None) -> tuple:
-        """(set-up effects of ``fit`` left out of the prediction of record ``name``, why): those effects when the
-        record was measured in another facility or at another scale than the records the fit was trained on (the
-        fold's, held out), unless ``keep_setup_effects``; ((), None) otherwise."""
+        """(set-up effects of ``fit`` left out of the prediction of record ``name``, why): those
+        effects when the record was measured in another facility or at another scale than the
+        records the fit was trained on (the fold's, held out), unless ``keep_setup_effects``;
+        ((), None) otherwise."""
         setup_effects = tuple(e for e in fit.effects if getattr(self.effects[e], "setup_effect", False))
         if not setup_effects or self.opt.keep_setup_effects:
             return (), None
@@ -157,8 +165,9 @@ class Doctor:
         return (setup_effects, why) if why else ((), None)
 
     def predict(self, problem, fit: Fit, df, info, fold: int | None = None):
-        """A record's replay by ``fit`` (``problem``: the full training problem, or the fold's when held out), the
-        set-up effects left out when the record is of another set-up (:meth:`setup_left_out`)."""
+        """A record's replay by ``fit`` (``problem``: the full training problem, or the fold's
+        when held out), the set-up effects left out when the record is of another set-up
+        (:meth:`setup_left_out`)."""
         drop, why = self.setup_left_out(fit, info.name, fold)
         if drop:
             for e in drop:
@@ -179,8 +188,8 @@ class Doctor:
         return out
 
     def setup_report(self, final: Evaluation) -> dict:
-        """The set-up effects of the final model, the records whose prediction left them out (and why), and the
-        sentences the report's notes carry."""
+        """The set-up effects of the final model, the records whose prediction left them out (and
+        why), and the sentences the report's notes carry."""
         effects = [e for e in final.effects if getattr(self.effects[e], "setup_effect", False)]
         left = {}
         names = self.val_names if self.mode == "given" else self.train_names
@@ -202,8 +211,8 @@ class Doctor:
         return {"effects": effects, "kept": bool(self.opt.keep_setup_effects), "left_out": left, "notes": notes}
 
     def rank(self, base: Evaluation, scored=None) -> tuple:
-        """Every candidate not in ``base`` added on top of it, compared on the ``scored`` records (those whose
-        baseline replay did not diverge): (rows best first, evaluations by effect)."""
+        """Every candidate not in ``base`` added on top of it, compared on the ``scored`` records
+        (those whose baseline replay did not diverge): (rows best first, evaluations by effect)."""
         evs = {}
         for c in self.candidates:
             if c in base.effects:
@@ -240,7 +249,8 @@ class Doctor:
         return rows, plausible
 
     def stability(self, base: Evaluation, evs: dict, named, ambiguous, scored=None) -> dict:
-        """The step's verdict repeated with each (scored) validation record left out: in how many it is the
+        """The step's verdict repeated with each (scored) validation record left out: in how many it
+        is the
         same."""
         recs = list(scored or base.errors)
         n = len(recs)
@@ -270,8 +280,9 @@ class Doctor:
         return notes
 
     def _ladder_row(self, step: str, ev: Evaluation, scored: list, **extra) -> dict:
-        """A ladder step: the validation error over every record (inf when one diverged) and over the scored
-        records (those where the baseline did not diverge: what steps are compared on)."""
+        """A ladder step: the validation error over every record (inf when one diverged) and over
+        the scored records (those where the baseline did not diverge: what steps are compared
+        on)."""
         return {"step": step, "effects": list(ev.effects), "validation_error": ev.validation_error,
                 "scored_error": mean_on(ev, scored), "scored_records": list(scored),
                 "training_error": ev.training_error, "diverged": ev.diverged, **extra}
@@ -353,8 +364,8 @@ class Doctor:
         return self.result
 
     def _opening_notes(self, base, scored: list) -> list:
-        """The report's notes known before any candidate is fitted: the input checks, the excitation, too few
-        records for the consistency test, a diverged baseline."""
+        """The report's notes known before any candidate is fitted: the input checks, the
+        excitation, too few records for the consistency test, a diverged baseline."""
         notes = list(self.check_messages) + self.excitation_notes()
         n_val = len(scored)
         if n_val < MIN_RECORDS_FOR_TEST:
@@ -374,7 +385,8 @@ class Doctor:
         return notes
 
     def _why_rejected(self, cand, scored: list, e_prev: float, e_new: float) -> str:
-        """Why a ladder step, refined, fails the ranking's bar (diverged, not lower, or not lower by enough)."""
+        """Why a ladder step, refined, fails the ranking's bar (diverged, not lower, or not lower
+        by enough)."""
         if not np.isfinite(e_new):
             return f"diverges on {', '.join(r for r in cand.diverged if r in scored)}"
         if e_new >= e_prev:
@@ -383,9 +395,9 @@ class Doctor:
                 f"{e_new:.3g}), less than the {100 * self.opt.min_improvement:.0f} % a candidate needs")
 
     def rudder_residual(self, base, final) -> dict:
-        """The residual yaw moment and sway force per rudder-angle bin of the baseline's and the final model's fit
-        (:func:`study.doctor.rudder_residual.residual_by_rudder`): a ramp says the rudder force is off, a kink at
-        zero that it differs to port and to starboard."""
+        """The residual yaw moment and sway force per rudder-angle bin of the baseline's and the
+        final model's fit (:func:`study.doctor.rudder_residual.residual_by_rudder`): a ramp says
+        the rudder force is off, a kink at zero that it differs to port and to starboard."""
         from .rudder_residual import residual_by_rudder
 
         out = {"baseline": residual_by_rudder(self.problem, base.fit)}
@@ -394,9 +406,10 @@ class Doctor:
         return out
 
     def depth_notes(self) -> list:
-        """A warning when some records give their water depth and others do not: those without share one fitted
-        h/T (or are deep), so a record run at a depth of its own is mispredicted (measured on simulated records
-        trained deep and at h/T 2.0, validated at 1.5 without a depth: the shallow-water candidate is not named)."""
+        """A warning when some records give their water depth and others do not: those without
+        share one fitted h/T (or are deep), so a record run at a depth of its own is mispredicted
+        (measured on simulated records trained deep and at h/T 2.0, validated at 1.5 without a
+        depth: the shallow-water candidate is not named)."""
         infos = list(self.problem.infos) + list(self.val_infos)
         given = [i.name for i in infos if i.h_T is not None]
         missing = [i.name for i in infos if i.h_T is None]
@@ -407,9 +420,10 @@ class Doctor:
                 "mispredicted; give each record's depth (a depth column, or depth in its metadata)"]
 
     def separating(self, ranking: list, evs: dict, missing, ambiguous, stab: list) -> dict | None:
-        """For a weak verdict, the manoeuvre that would best tell the two leading candidates apart
-        (:mod:`study.doctor.separating`): the tie when the data cannot tell two apart, or the named effect and the
-        runner-up when the name does not survive leaving each validation record out. None otherwise."""
+        """For a weak verdict, the manoeuvre that would best tell the two leading candidates
+        apart (:mod:`study.doctor.separating`): the tie when the data cannot tell two apart, or
+        the named effect and the runner-up when the name does not survive leaving each validation
+        record out. None otherwise."""
         from .separating import separating_maneuvers
 
         if ambiguous:
@@ -426,9 +440,10 @@ class Doctor:
 
     # ------------------------------------------------------------------------------------------ report
     def report(self) -> dict:
-        """The diagnosis as the report's JSON holds it (the first fields of :class:`.report_schema.Report`): the
-        verdict, baseline, ranking, ladder, stability, final model, identifiability, errors per record and channel,
-        notes, set-up effects, facilities and depths."""
+        """The diagnosis as the report's JSON holds it (the first fields of
+        :class:`.report_schema.Report`): the verdict, baseline, ranking, ladder, stability, final
+        model, identifiability, errors per record and channel, notes, set-up effects, facilities
+        and depths."""
         r = self.result
         base, final = r["base"], r["final"]
         m = r["missing"]
@@ -471,8 +486,9 @@ class Doctor:
         }
 
     def _verdict(self) -> str:
-        """The report's one line: the missing effect with its fall of the error and its parameters, a tie, a
-        rejected best candidate or nothing significant; a diverged baseline said first."""
+        """The report's one line: the missing effect with its fall of the error and its
+        parameters, a tie, a rejected best candidate or nothing significant; a diverged baseline
+        said first."""
         r = self.result
         base, m = r["base"], r["missing"]
         stab = {s["step"]: s for s in r["stability"]}

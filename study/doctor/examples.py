@@ -1,23 +1,27 @@
-"""``python -m study doctor_examples``: the doctor's five worked examples, rebuilt into ``paper_figs/doctor/``.
+"""``python -m study doctor_examples``: the doctor's five worked examples, rebuilt into
+``paper_figs/doctor/``.
 
 1. ``simulated_current``: the README's example -- five records of the 7 m KVLCC2 made by ``python -m
-   study simulate`` with a hidden current (10 % of the speed towards the north-east), 1 % noise; the model is
-   the vessel's own (``known``).
-2. ``esso_osaka``: the Esso Osaka 3 m model's free-running zigzags (training) and its 14 turning circles
-   (validation), Osaka University's pond, with its measured wind; the model is ``esso_osaka`` as configured (its
-   empirical hull from the main particulars, KVLCC2's interaction coefficients as a labelled stand-in).
-3. ``esso_osaka_identified``: the hull identified from the zigzags and the random-rudder runs, anchored to that
-   empirical hull, validated on the same 14 turns.
-4. ``kvlcc2_hsva``: HSVA's free-running KVLCC2 zigzags, the 5 deg and 1 deg switch-heading ones for training,
-   the 10/10 and 20/10 ones (both sides) for validation; the model is ``kvlcc2_l7``, the published MMG set.
-5. ``kvlcc2_hsva_identified``: the same records, the MMG hull identified from them (anchored to the published
-   set): the user's normal case.
+   study simulate`` with a hidden current (10 % of the speed towards the north-east), 1 % noise; the
+   model is the vessel's own (``known``).
+2. ``esso_osaka``: the Esso Osaka 3 m model's free-running zigzags (training) and its 14 turning
+   circles (validation), Osaka University's pond, with its measured wind; the model is
+   ``esso_osaka`` as configured (its empirical hull from the main particulars, KVLCC2's interaction
+   coefficients as a labelled stand-in).
+3. ``esso_osaka_identified``: the hull identified from the zigzags and the random-rudder runs,
+   anchored to that empirical hull, validated on the same 14 turns.
+4. ``kvlcc2_hsva``: HSVA's free-running KVLCC2 zigzags, the 5 deg and 1 deg switch-heading ones for
+   training, the 10/10 and 20/10 ones (both sides) for validation; the model is ``kvlcc2_l7``, the
+   published MMG set.
+5. ``kvlcc2_hsva_identified``: the same records, the MMG hull identified from them (anchored to the
+   published set): the user's normal case.
 
-Each writes ``<out>/<example>/`` (report.html, report.json, figures/) and the summary ``<out>/README.md``. The
-committed ones are ``paper_figs/doctor/``: ``python -m study doctor_examples --out paper_figs/doctor --overwrite``
-rebuilds them; by default the examples go to ``doctor_examples/`` in the current folder, and a folder that holds a
-report is never replaced without ``--overwrite``. The real data are read in place (``../shared/data/real``); an
-example whose data are missing is skipped and listed as such. The runs are not logged in the results table.
+Each writes ``<out>/<example>/`` (report.html, report.json, figures/) and the summary
+``<out>/README.md``. The committed ones are ``paper_figs/doctor/``: ``python -m study
+doctor_examples --out paper_figs/doctor --overwrite`` rebuilds them; by default the examples go to
+``doctor_examples/`` in the current folder, and a folder that holds a report is never replaced
+without ``--overwrite``. The real data are read in place (``../shared/data/real``); an example whose
+data are missing is skipped and listed as such. The runs are not logged in the results table.
 """
 from __future__ import annotations
 
@@ -57,9 +61,9 @@ def esso_osaka(out: Path = DEFAULT_OUT, overwrite: bool = False) -> dict:
 
 
 def esso_osaka_identified(out: Path = DEFAULT_OUT, overwrite: bool = False) -> dict:
-    """Esso Osaka's MMG hull identified from its zigzags and random-rudder runs (the data papers' training
-    set), anchored to its empirical prior (the config's hull), validated on all 14 measured turning circles: a
-    turn from zigzags, on real records."""
+    """Esso Osaka's MMG hull identified from its zigzags and random-rudder runs (the data papers'
+    training set), anchored to its empirical prior (the config's hull), validated on all 14
+    measured turning circles: a turn from zigzags, on real records."""
     from .run import diagnose_conf, run
     from study.records.loaders import real_data_dir
 
@@ -78,8 +82,8 @@ def kvlcc2_hsva(out: Path = DEFAULT_OUT, overwrite: bool = False) -> dict:
 
 
 def kvlcc2_hsva_identified(out: Path = DEFAULT_OUT, overwrite: bool = False) -> dict:
-    """The HSVA zigzags again, with the MMG hull identified from them (anchored to the published set): the
-    user's normal case."""
+    """The HSVA zigzags again, with the MMG hull identified from them (anchored to the published
+    set): the user's normal case."""
     from .run import diagnose_conf, run
     from study.records.loaders import real_data_dir
 
@@ -90,10 +94,11 @@ def kvlcc2_hsva_identified(out: Path = DEFAULT_OUT, overwrite: bool = False) -> 
 
 
 def _turns(rep: dict) -> list:
-    """The validation turning circles' tactical diameters (report.json ``maneuver_metrics``): measured, the
-    baseline model's and the final model's replays with the final's 90 % interval, the mean relative error of each
-    over the turns both replays complete, how many intervals hold the measured value and their median half-width;
-    then the final model's predicted 35 deg turns (``prediction_uncertainty``)."""
+    """The validation turning circles' tactical diameters (report.json ``maneuver_metrics``):
+    measured, the baseline model's and the final model's replays with the final's 90 % interval,
+    the mean relative error of each over the turns both replays complete, how many intervals hold
+    the measured value and their median half-width; then the final model's predicted 35 deg turns
+    (``prediction_uncertainty``)."""
     rows = [m for m in rep.get("maneuver_metrics", []) if m["metric"] == "tactical_diameter_L"]
     ok = lambda x: x is not None and x == x and abs(x) != float("inf")  # noqa: E731
     out = []

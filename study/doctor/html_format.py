@@ -1,9 +1,10 @@
-"""What the report page's view data (:mod:`.html_view`) is built from: the formatting of numbers and units, and
-which replays diverged, read from a :class:`.report_schema.Report` (whose schema says each key's type).
+"""What the report page's view data (:mod:`.html_view`) is built from: the formatting of numbers and
+units, and which replays diverged, read from a :class:`.report_schema.Report` (whose schema says
+each key's type).
 
-Numbers are formatted here: 4 significant digits, ``n/a`` for a missing or not-a-number value; an error figure
-of a diverged replay (or an infinite one) is the word ``diverged`` (:data:`DIVERGED`), never a number; ``inf`` is
-never shown.
+Numbers are formatted here: 4 significant digits, ``n/a`` for a missing or not-a-number value; an
+error figure of a diverged replay (or an infinite one) is the word ``diverged`` (:data:`DIVERGED`),
+never a number; ``inf`` is never shown.
 """
 from __future__ import annotations
 
@@ -54,8 +55,9 @@ def finite(x: Any) -> float | None:
 
 
 def fmt_num(x: Any, digits: int = 4) -> str:
-    """A number with ``digits`` significant digits; NaN, None and non-numbers -> ``"n/a"``. ``inf`` stays
-    ``"inf"`` here; the page never shows it (an infinite error is a diverged replay, see :func:`err`)."""
+    """A number with ``digits`` significant digits; NaN, None and non-numbers -> ``"n/a"``.
+    ``inf`` stays ``"inf"`` here; the page never shows it (an infinite error is a diverged
+    replay, see :func:`err`)."""
     v = as_float(x)
     if v is None or math.isnan(v):
         return NA
@@ -81,7 +83,8 @@ def num(x: Any, digits: int = 4) -> str:
 
 
 def err(x: Any, diverged: bool = False) -> str:
-    """An error figure: ``diverged`` when the replay diverged or the value is infinite, else :func:`num`."""
+    """An error figure: ``diverged`` when the replay diverged or the value is infinite, else
+    :func:`num`."""
     v = as_float(x)
     return DIVERGED if diverged or (v is not None and math.isinf(v)) else num(x)
 
@@ -109,8 +112,8 @@ def metric_num(x: Any) -> str:
 
 
 def interval(low: Any, high: Any) -> list[str] | None:
-    """``[low, high]`` to 4 significant digits, None when either is not a finite number (bools and strings are no
-    numbers here)."""
+    """``[low, high]`` to 4 significant digits, None when either is not a finite number (bools
+    and strings are no numbers here)."""
     lo, hi = (float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) else None
               for x in (low, high))
     return None if lo is None or hi is None else [fmt_num(lo), fmt_num(hi)]
@@ -121,7 +124,8 @@ def as_text(x: Any) -> str:
 
 
 def param_value(v: Any) -> str:
-    """A parameter's value: a number to 4 significant digits (n/a when NaN or infinite), a word as it is."""
+    """A parameter's value: a number to 4 significant digits (n/a when NaN or infinite), a word
+    as it is."""
     return v if isinstance(v, str) and as_float(v) is None else num(v)
 
 
@@ -130,9 +134,9 @@ def known(recs: list[str]) -> list[str]:
 
 
 def unit(name: Any, units: Mapping, notes: dict | None = None) -> dict | None:
-    """The unit of a parameter (``{"text": "[m/s]", "sup": None}``), or None. With ``notes`` (remark -> number,
-    filled here) a unit ``"- (non-dimensional, ...)"`` is ``[-]`` and a footnote number, its remark listed once
-    under the table."""
+    """The unit of a parameter (``{"text": "[m/s]", "sup": None}``), or None. With ``notes``
+    (remark -> number, filled here) a unit ``"- (non-dimensional, ...)"`` is ``[-]`` and a
+    footnote number, its remark listed once under the table."""
     u = units.get(str(name))
     if u is None or str(u).strip() == "":
         return None
@@ -153,7 +157,8 @@ def param_items(p: Mapping, units: Mapping, notes: dict | None = None) -> list:
 
 
 def footnote(r: Report, terms: Iterable[str], extra: Iterable[tuple[str, str]] = ()) -> list:
-    """A footnote under a table: the report's definitions of ``terms`` (those it has), then ``extra``."""
+    """A footnote under a table: the report's definitions of ``terms`` (those it has), then
+    ``extra``."""
     d = r.definitions or {}
     items = [(t, d[t]) for t in terms if d.get(t, "").strip()] + [(t, x) for t, x in extra if x]
     return [{"term": t, "text": x.rstrip(". ")} for t, x in items]
@@ -186,13 +191,14 @@ def verdict_diverged(r: Report) -> bool:
 
 
 def no_final_model(r: Report) -> bool:
-    """True when the report says no effect was added (so no "model with the effects" is drawn anywhere)."""
+    """True when the report says no effect was added (so no "model with the effects" is drawn
+    anywhere)."""
     return sorted(r.final["effects"]) == sorted(r.baseline["effects"])
 
 
 def divergences(r: Report) -> list[dict]:
-    """``{what, on}`` of every replay that diverged: the baseline, each ladder step, the final model, each
-    candidate of the ranking (``on``: the records named)."""
+    """``{what, on}`` of every replay that diverged: the baseline, each ladder step, the final
+    model, each candidate of the ranking (``on``: the records named)."""
     out, seen = [], set()
 
     def add(what: str, recs: list[str], key: str | None = None) -> None:

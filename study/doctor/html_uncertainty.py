@@ -1,9 +1,11 @@
-"""The view data of the report's section on how far the predictions can be trusted (``prediction_uncertainty``
-in ``report.json``, written by ``study.doctor.uncertainty``): the plain summary first (which predictions
-extrapolate, how far, in which states, and which coefficients carry them), then the predicted 35 deg turns with
-their intervals, the validation metrics' intervals and carriers, the calibration of the extrapolation error, the
-models counted as indistinguishable, and the method with what it does not cover (``templates/uncertainty.html.j2``
-lays it out). A part the section does not have is left out; its numbers are formatted as elsewhere on the page."""
+"""The view data of the report's section on how far the predictions can be trusted
+(``prediction_uncertainty`` in ``report.json``, written by ``study.doctor.uncertainty``): the
+plain summary first (which predictions extrapolate, how far, in which states, and which
+coefficients carry them), then the predicted 35 deg turns with their intervals, the validation
+metrics' intervals and carriers, the calibration of the extrapolation error, the models counted
+as indistinguishable, and the method with what it does not cover
+(``templates/uncertainty.html.j2`` lays it out). A part the section does not have is left out;
+its numbers are formatted as elsewhere on the page."""
 from __future__ import annotations
 
 from collections.abc import Mapping

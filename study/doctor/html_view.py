@@ -1,9 +1,9 @@
-"""The report page's view data: a :class:`.report_schema.Report` turned once into plain lists and dicts of strings
-and numbers, in the order and with the words the page shows them; the templates of ``templates/`` lay them out and
-:mod:`.html` renders them.
+"""The report page's view data: a :class:`.report_schema.Report` turned once into plain lists and
+dicts of strings and numbers, in the order and with the words the page shows them; the templates of
+``templates/`` lay them out and :mod:`.html` renders them.
 
-Each section's function reads the report as its schema types it and returns the section's data, or None when the
-report has nothing for it: the page and its table of contents then leave it out.
+Each section's function reads the report as its schema types it and returns the section's data, or
+None when the report has nothing for it: the page and its table of contents then leave it out.
 """
 from __future__ import annotations
 
@@ -35,7 +35,8 @@ def summary(r: Report) -> list:
 
 
 def _with_units(text: str, units: Mapping) -> list:
-    """``text`` in pieces, a piece ending at each ``name = number`` of a parameter with a unit (``unit``)."""
+    """``text`` in pieces, a piece ending at each ``name = number`` of a parameter with a unit
+    (``unit``)."""
     pieces, at = [], 0
     for m in re.finditer(r"\b([A-Za-z_][A-Za-z0-9_]*) = (-?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)", text):
         u = unit(m.group(1), units)
@@ -46,8 +47,8 @@ def _with_units(text: str, units: Mapping) -> list:
 
 
 def verdict(r: Report) -> dict:
-    """The verdict box: its kind (``diverged``, ``found``, ``ambiguous`` or ``none``), what its headline names, the
-    report's verdict sentence (with units) and what follows it."""
+    """The verdict box: its kind (``diverged``, ``found``, ``ambiguous`` or ``none``), what its
+    headline names, the report's verdict sentence (with units) and what follows it."""
     missing, ambiguous = r.missing_effect, r.ambiguous
     stab = stability_by_step(r).get(1)
     v: dict = {"named": named_in(stab, long=True), "role": "status", "others": [], "defs": []}
@@ -87,7 +88,8 @@ def verdict(r: Report) -> dict:
 
 
 def divergence(r: Report) -> dict | None:
-    """The warning box listing every diverged replay (when the verdict is not already the divergence)."""
+    """The warning box listing every diverged replay (when the verdict is not already the
+    divergence)."""
     items = [] if verdict_diverged(r) else divergences(r)
     return {"entries": items, "defs": [d for d in [definition(r, "diverged")] if d]} if items else None
 
@@ -204,9 +206,9 @@ def errors(r: Report) -> dict | None:
 
 
 def metric_rows(rows: list, bdiv: set = frozenset(), fdiv: set = frozenset()) -> list:
-    """The manoeuvre metrics' rows (``study.records.maneuver_metrics.maneuver_metrics``): record, metric with its
-    definition, unit, and measured, baseline and final (each with its 90 % interval when it has one); a replay
-    that diverged has no metric, and says so."""
+    """The manoeuvre metrics' rows (``study.records.maneuver_metrics.maneuver_metrics``): record,
+    metric with its definition, unit, and measured, baseline and final (each with its 90 %
+    interval when it has one); a replay that diverged has no metric, and says so."""
     from study.records.maneuver_metrics import COLUMNS, TURNING_METRICS, ZIGZAG_METRICS
 
     descriptions = {m: d for m, _, d in TURNING_METRICS + ZIGZAG_METRICS}
@@ -236,8 +238,9 @@ def maneuvers(r: Report) -> dict | None:
 
 
 def identifiability(r: Report) -> dict | None:
-    """Per anchored coefficient of the baseline fit: prior, estimate, prior and posterior sd, their ratio and the
-    doctor's sentence; the coefficients the records do not determine, and prior-data conflicts, marked."""
+    """Per anchored coefficient of the baseline fit: prior, estimate, prior and posterior sd,
+    their ratio and the doctor's sentence; the coefficients the records do not determine, and
+    prior-data conflicts, marked."""
     rows, n_not, n_conf = [], 0, 0
     for it in r.identifiability or []:
         ratio, moved = it["ratio"], it["moved_prior_sd"]
@@ -357,8 +360,8 @@ def catalogue(r: Report) -> dict | None:
 
 
 def separating(r: Report) -> dict | None:
-    """The manoeuvres that would best tell the two leading candidates apart, best first (the top eight), and the
-    records in hand scored the same way."""
+    """The manoeuvres that would best tell the two leading candidates apart, best first (the top
+    eight), and the records in hand scored the same way."""
     sep = r.separating_maneuver
     menu = sep["menu"] if sep else []
     if not menu:
@@ -373,7 +376,8 @@ def separating(r: Report) -> dict | None:
 
 
 def rudder_residual(r: Report) -> dict | None:
-    """Mean residual N' and Y' (x 1e4) of the training rows per rudder-angle bin, baseline and final model."""
+    """Mean residual N' and Y' (x 1e4) of the training rows per rudder-angle bin, baseline and
+    final model."""
     rr = r.rudder_residual or {}
     fits = [(label, rr[k]) for k, label in (("baseline", "baseline"), ("final", "final model"))
             if rr.get(k) and rr[k].get("bins")]
@@ -450,9 +454,9 @@ def uncertainty(r: Report) -> dict | None:
 
 
 def view(r: Report, figure_bytes: Mapping | None = None) -> dict:
-    """The page's view data: title, footer, the summary line, the verdict, the divergence box, the conventions,
-    then each section with something to show (``sections``, in page order, each with its ``id`` and ``title``)
-    and the table of contents built from them."""
+    """The page's view data: title, footer, the summary line, the verdict, the divergence box,
+    the conventions, then each section with something to show (``sections``, in page order, each
+    with its ``id`` and ``title``) and the table of contents built from them."""
     figs = {str(k): v for k, v in figure_bytes.items()} if isinstance(figure_bytes, Mapping) else {}
     sections = [s for s in (ladder(r), ranking(r), errors(r), maneuvers(r), uncertainty(r), identifiability(r),
                             figures(r, figs), separating(r), rudder_residual(r), worst(r), catalogue(r), notes(r), data(r), definitions(r),

@@ -1,25 +1,28 @@
-"""The three parts of a predicted metric's uncertainty, measured on a fitted model and its training records
-(the arithmetic that combines them: ``study.doctor.prediction_interval``).
+"""The three parts of a predicted metric's uncertainty, measured on a fitted model and its training
+records (the arithmetic that combines them: ``study.doctor.prediction_interval``).
 
-- :func:`posterior_draws` and :func:`replay_members`: the fit's posterior draws (or any other coefficient sets)
-  replayed through a record in one compiled batch, as ``EffectsProblem.predict`` replays one fit;
-- :func:`anchor_variants` and :func:`published_set`: models as defensible as the fit -- the anchor's relative sd
-  halved and doubled (a setting: 30 % is a choice), and the anchor set itself when it fits the training records
-  about as well (training error within ``tie`` of the fit's);
-- :func:`calibrate`: the extrapolation error, measured on the training records themselves. They are ranked by
-  how far they reach (their envelope, ``prediction_interval.state_envelope``, relative to all of them); the
-  gentler half is trained and the harsher half predicted, and each record is left out in turn and predicted
-  from the others (pairs mostly inside the envelope, for the floor) -- each split's model
-  identified with the fit's effects, their nonlinear parameters held at the fit's values (assumption: they do
-  not depend on the split). Each held-out record is replayed (from its manoeuvre's start; a record that starts
-  at rest from where it first reaches half the service speed) and gives its distance outside the split's
-  envelope and the relative error of every manoeuvre metric it carries, and of its RMS yaw rate, and the split's
-  posterior draws replayed through it give that prediction's own identification spread (:func:`own_spread`),
-  which :func:`growth_for` takes out of the error;
-- :func:`sensitivities`: per coefficient, the metric's change for one posterior sd either way (central
-  difference over +-1 sd: the secant, robust to the simulation's nonlinearity) and when the coefficient is reset
-  to its anchor value; its share of the metric's variance, g_j^2 var_j / sum_k g_k^2 var_k (each coefficient
-  alone: correlations between coefficients are left out of the shares, an assumption).
+- :func:`posterior_draws` and :func:`replay_members`: the fit's posterior draws (or any other
+  coefficient sets) replayed through a record in one compiled batch, as ``EffectsProblem.predict``
+  replays one fit;
+- :func:`anchor_variants` and :func:`published_set`: models as defensible as the fit -- the anchor's
+  relative sd halved and doubled (a setting: 30 % is a choice), and the anchor set itself when it
+  fits the training records about as well (training error within ``tie`` of the fit's);
+- :func:`calibrate`: the extrapolation error, measured on the training records themselves. They are
+  ranked by how far they reach (their envelope, ``prediction_interval.state_envelope``, relative to
+  all of them); the gentler half is trained and the harsher half predicted, and each record is left
+  out in turn and predicted from the others (pairs mostly inside the envelope, for the floor) --
+  each split's model identified with the fit's effects, their nonlinear parameters held at the fit's
+  values (assumption: they do not depend on the split). Each held-out record is replayed (from its
+  manoeuvre's start; a record that starts at rest from where it first reaches half the service
+  speed) and gives its distance outside the split's envelope and the relative error of every
+  manoeuvre metric it carries, and of its RMS yaw rate, and the split's posterior draws replayed
+  through it give that prediction's own identification spread (:func:`own_spread`), which
+  :func:`growth_for` takes out of the error;
+- :func:`sensitivities`: per coefficient, the metric's change for one posterior sd either way
+  (central difference over +-1 sd: the secant, robust to the simulation's nonlinearity) and when the
+  coefficient is reset to its anchor value; its share of the metric's variance, g_j^2 var_j / sum_k
+  g_k^2 var_k (each coefficient alone: correlations between coefficients are left out of the shares,
+  an assumption).
 """
 from __future__ import annotations
 
@@ -48,7 +51,8 @@ CAL_DRAWS = 16
 
 
 def model_cfg_of(problem) -> dict:
-    """The model config an ``EffectsProblem`` was built from (free coefficients per equation, omitted terms)."""
+    """The model config an ``EffectsProblem`` was built from (free coefficients per equation,
+    omitted terms)."""
     eqs = {}
     for c, eq in problem.model_eq.items():
         eqs.setdefault(eq, []).append(c)
@@ -61,8 +65,9 @@ def model_cfg_of(problem) -> dict:
 
 
 def posterior_draws(problem, fit, draws: int, seed: int = 0) -> tuple:
-    """(posterior, list of coefficient dicts): ``draws`` draws from the fit's Gaussian posterior (the covariance
-    made positive semidefinite by clipping its eigenvalues); (None, []) when nothing is free."""
+    """(posterior, list of coefficient dicts): ``draws`` draws from the fit's Gaussian posterior
+    (the covariance made positive semidefinite by clipping its eigenvalues); (None, []) when
+    nothing is free."""
     post = problem.posterior(fit) if draws else None
     if post is None:
         return None, []
@@ -73,16 +78,17 @@ def posterior_draws(problem, fit, draws: int, seed: int = 0) -> tuple:
 
 
 def params_of(problem, fit, coefs: dict, info=None, replay: bool = True) -> np.ndarray:
-    """The packed vessel parameters of ``fit`` with its coefficients replaced by ``coefs`` (those the fit lacks
-    -- a set-up effect left out -- are dropped)."""
+    """The packed vessel parameters of ``fit`` with its coefficients replaced by ``coefs`` (those
+    the fit lacks -- a set-up effect left out -- are dropped)."""
     c = {k: float(v) for k, v in coefs.items() if k in fit.coefs}
     return problem.vessel(fit.effects, {**fit.outer, **c}, info, coefs={**fit.coefs, **c}, replay=replay).params
 
 
 def replay_members(problem, fit, df: pd.DataFrame, info, coef_sets: list) -> list:
-    """``fit`` replayed through the record ``df`` once per coefficient set, in one compiled batch, exactly as
-    ``EffectsProblem.predict`` replays it (first segment, the record's rudder and propeller, the effects'
-    initial state); a member that overflows or leaves ``ENVELOPE`` is None."""
+    """``fit`` replayed through the record ``df`` once per coefficient set, in one compiled
+    batch, exactly as ``EffectsProblem.predict`` replays it (first segment, the record's rudder
+    and propeller, the effects' initial state); a member that overflows or leaves ``ENVELOPE`` is
+    None."""
     from ..identify.output_error import initial_value
     from ..identify.structures import segments
     from ..identify.with_effects import ENVELOPE
@@ -115,9 +121,10 @@ def replay_members(problem, fit, df: pd.DataFrame, info, coef_sets: list) -> lis
 
 
 def replay_start(df: pd.DataFrame, U0: float) -> float | None:
-    """Where a record's prediction starts: its manoeuvre's start (``maneuver_metrics.manoeuvre_start``); for a
-    record with none that starts below half the service speed, the first time it reaches it; else None (the
-    whole record). NaN when it never reaches it (no prediction at speed to compare)."""
+    """Where a record's prediction starts: its manoeuvre's start
+    (``maneuver_metrics.manoeuvre_start``); for a record with none that starts below half the
+    service speed, the first time it reaches it; else None (the whole record). NaN when it never
+    reaches it (no prediction at speed to compare)."""
     from study.records.maneuver_metrics import manoeuvre_start
 
     t0 = manoeuvre_start(df)
@@ -141,9 +148,10 @@ def cut(df: pd.DataFrame, t0) -> pd.DataFrame | None:
 
 
 def rms_yaw_rate(frame, measured, U0: float) -> float:
-    """The surrogate metric: the RMS yaw rate of ``frame`` over the samples where the ``measured`` record moves
-    at speed (at least half the service speed); NaN when fewer than half its samples do (a record at low speed
-    is another regime than the manoeuvres at speed the metrics describe)."""
+    """The surrogate metric: the RMS yaw rate of ``frame`` over the samples where the
+    ``measured`` record moves at speed (at least half the service speed); NaN when fewer than
+    half its samples do (a record at low speed is another regime than the manoeuvres at speed the
+    metrics describe)."""
     if frame is None:
         return math.nan
     t = np.asarray(frame["time"], float)
@@ -155,9 +163,9 @@ def rms_yaw_rate(frame, measured, U0: float) -> float:
 
 
 def metric_values(name: str, measured: pd.DataFrame, frame, L: float, U0: float) -> dict:
-    """{metric: value} of ``frame`` (a replay of the record ``measured``, or the record itself), the manoeuvre
-    metrics of ``study.records.maneuver_metrics`` (from the measured record's switch heading) and the RMS yaw rate at
-    speed (:func:`rms_yaw_rate`)."""
+    """{metric: value} of ``frame`` (a replay of the record ``measured``, or the record itself),
+    the manoeuvre metrics of ``study.records.maneuver_metrics`` (from the measured record's
+    switch heading) and the RMS yaw rate at speed (:func:`rms_yaw_rate`)."""
     from study.records.maneuver_metrics import maneuver_metrics
 
     if frame is None:
@@ -175,8 +183,9 @@ def log_error(pred, meas) -> float:
 
 # ---------------------------------------------------------------------------------------------- alternatives
 def without_effects(problem, fit, drop):
-    """``fit`` with the effects ``drop`` left out: their nonlinear parameters, linear unknowns and the coefficients
-    they alone freed removed (those return to the vessel config's values); everything else as identified."""
+    """``fit`` with the effects ``drop`` left out: their nonlinear parameters, linear unknowns
+    and the coefficients they alone freed removed (those return to the vessel config's values);
+    everything else as identified."""
     drop = [e for e in fit.effects if e in set(drop)]
     if not drop:
         return fit
@@ -193,8 +202,9 @@ def _records_of(problem, idx) -> list:
 
 
 def refit(problem, fit, records_idx=None, anchor: float | None = None):
-    """(problem, fit): ``fit``'s effects identified again on the training records ``records_idx`` (default all)
-    with the anchor ``anchor`` (default the problem's), the effects' nonlinear parameters held at ``fit``'s."""
+    """(problem, fit): ``fit``'s effects identified again on the training records ``records_idx``
+    (default all) with the anchor ``anchor`` (default the problem's), the effects' nonlinear
+    parameters held at ``fit``'s."""
     from ..identify.with_effects import EffectsProblem
 
     idx = list(range(len(problem.records))) if records_idx is None else list(records_idx)
@@ -206,8 +216,9 @@ def refit(problem, fit, records_idx=None, anchor: float | None = None):
 
 
 def anchor_variants(problem, fit, factors=(0.5, 2.0)) -> list:
-    """[(label, problem, fit)]: ``fit`` identified again with the anchor's relative sd times each factor (the
-    30 % default is a choice; half and double it are as defensible). None for an unanchored fit."""
+    """[(label, problem, fit)]: ``fit`` identified again with the anchor's relative sd times each
+    factor (the 30 % default is a choice; half and double it are as defensible). None for an
+    unanchored fit."""
     if not problem.anchor or not problem.model_free:
         return []
     out = []
@@ -219,10 +230,11 @@ def anchor_variants(problem, fit, factors=(0.5, 2.0)) -> list:
 
 
 def at_bounds(problem, fit, rel: float = 1e-3) -> list:
-    """The effects' nonlinear parameters of ``fit`` that lie on a bound of their search box (within ``rel`` of
-    its width): their optimum lies outside the range the catalogue holds physical -- an identification that
-    failed, not a model the records support (a wake fraction of 0.7, a depth of 1.1 drafts in a pond). A bound
-    at zero is not counted: there the effect vanishes (no delay, no lag), a physical limit, not a failure."""
+    """The effects' nonlinear parameters of ``fit`` that lie on a bound of their search box
+    (within ``rel`` of its width): their optimum lies outside the range the catalogue holds
+    physical -- an identification that failed, not a model the records support (a wake fraction
+    of 0.7, a depth of 1.1 drafts in a pond). A bound at zero is not counted: there the effect
+    vanishes (no delay, no lag), a physical limit, not a failure."""
     out = []
     for name, lo, hi, _ in problem.outer_params(fit.effects):
         x = fit.outer.get(name)
@@ -234,14 +246,16 @@ def at_bounds(problem, fit, rel: float = 1e-3) -> list:
 
 
 def data_error(problem, fit) -> float:
-    """The fit's misfit of the training rows alone (its training error without the anchor's penalty)."""
+    """The fit's misfit of the training rows alone (its training error without the anchor's
+    penalty)."""
     ref = problem.reference()
     return float(np.mean([fit.rss[eq] / ref[k] for k, eq in enumerate(("X", "Y", "N"))])) if fit.rss else math.nan
 
 
 def published_set(problem, fit, tie: float = 0.1) -> tuple:
-    """((label, problem, fit) or None, why): the anchor set itself (the vessel config's coefficients, the
-    effects' own unknowns solved) as an alternative when its training misfit is within ``tie`` of the fit's."""
+    """((label, problem, fit) or None, why): the anchor set itself (the vessel config's
+    coefficients, the effects' own unknowns solved) as an alternative when its training misfit is
+    within ``tie`` of the fit's."""
     if not problem.model_free:
         return None, "the model has no free coefficients: the fit is the vessel config's set"
     coefs, J, rss = problem.solve(fit.effects, dict(fit.outer), model=False)
@@ -256,10 +270,11 @@ def published_set(problem, fit, tie: float = 0.1) -> tuple:
 
 # ---------------------------------------------------------------------------------------------- calibration
 def reaches(envelopes: list) -> list:
-    """Each record's reach: the mean over the states of its envelope over all records' (a state it has no sample
-    of counts 0; the mean, not the largest, so that records which all reach the same rudder angle still rank).
-    :func:`calibrate` ranks by the records' envelopes at speed (``START_SPEED_U0``): a weighted quantile does not
-    see that a whole record was run slowly, and a record run slowly is no harsh manoeuvre at speed."""
+    """Each record's reach: the mean over the states of its envelope over all records' (a state
+    it has no sample of counts 0; the mean, not the largest, so that records which all reach the
+    same rudder angle still rank). :func:`calibrate` ranks by the records' envelopes at speed
+    (``START_SPEED_U0``): a weighted quantile does not see that a whole record was run slowly,
+    and a record run slowly is no harsh manoeuvre at speed."""
     keys = list(pi.STATES)
     total = {k: max([e[k] for e in envelopes if np.isfinite(e[k])] or [math.nan]) for k in keys}
     return [float(np.mean([e[k] / total[k] if np.isfinite(e[k]) and total[k] > 0 else 0.0 for k in keys]))
@@ -268,8 +283,9 @@ def reaches(envelopes: list) -> list:
 
 def splits(envelopes: list) -> list:
     """[(label, trained indices, predicted indices)]: the gentler half -> the harsher half (by
-    :func:`reaches`), then each record left out in turn (with nearly all the data: the error of a model like the
-    full one, mostly inside the envelope -- the floor -- and outside it for the records that reach furthest)."""
+    :func:`reaches`), then each record left out in turn (with nearly all the data: the error of a
+    model like the full one, mostly inside the envelope -- the floor -- and outside it for the
+    records that reach furthest)."""
     order = [int(i) for i in np.argsort(reaches(envelopes), kind="stable")]
     n = len(order)
     if n < 2:
@@ -280,9 +296,9 @@ def splits(envelopes: list) -> list:
 
 
 def calibrate(problem, fit) -> dict:
-    """The held-out pairs of :func:`splits` (see the module docstring): ``{'pairs': [{record, split,
-    distance, state, errors: {metric: |log error|}, own_sd: {metric: the prediction's identification spread}}],
-    'envelope': the training envelope, 'splits', 'notes'}``."""
+    """The held-out pairs of :func:`splits` (see the module docstring): ``{'pairs': [{record,
+    split, distance, state, errors: {metric: |log error|}, own_sd: {metric: the prediction's
+    identification spread}}], 'envelope': the training envelope, 'splits', 'notes'}``."""
     L, U0 = problem.L, problem.U0
     envs = [pi.state_envelope(df, L, U0, min_speed=START_SPEED_U0) for df in problem.records]
     reach = reaches(envs)
@@ -324,9 +340,10 @@ def calibrate(problem, fit) -> dict:
 
 def own_spread(problem, fit, df: pd.DataFrame, info, name: str, metrics: list, draws: int = CAL_DRAWS,
                seed: int = 0) -> dict:
-    """{metric: the identification spread of a held-out prediction} -- ``draws`` posterior draws of the split's
-    ``fit`` replayed through the held-out record ``df`` (:func:`replay_members`), the sd of each metric's log over
-    them (``prediction_interval.draws_log_sd``; NaN when fewer than half the draws reach it)."""
+    """{metric: the identification spread of a held-out prediction} -- ``draws`` posterior draws
+    of the split's ``fit`` replayed through the held-out record ``df`` (:func:`replay_members`),
+    the sd of each metric's log over them (``prediction_interval.draws_log_sd``; NaN when fewer
+    than half the draws reach it)."""
     _, sets = posterior_draws(problem, fit, draws, seed)
     if not sets or not metrics:
         return {m: math.nan for m in metrics}
@@ -335,18 +352,20 @@ def own_spread(problem, fit, df: pd.DataFrame, info, name: str, metrics: list, d
 
 
 def growth_for(cal: dict, metric: str) -> dict:
-    """The extrapolation error's growth for ``metric`` from the held-out pairs of records that reach at least
-    ``MIN_REACH`` of the farthest record's reach (assumption: a much smaller manoeuvre's relative errors are
-    dominated by what a large one hardly feels -- a rudder offset, an asymmetry, the noise -- and say nothing about
-    a prediction at the envelope's edge or beyond): the metric's own errors where two or more such records carry
-    it, else those of the surrogate (the RMS yaw rate) -- ``source`` says which. A held-out replay that diverged
-    counts as an error of log 2 at the farthest distance seen, so that divergence is not left out (assumption).
+    """The extrapolation error's growth for ``metric`` from the held-out pairs of records that reach
+    at least ``MIN_REACH`` of the farthest record's reach (assumption: a much smaller manoeuvre's
+    relative errors are dominated by what a large one hardly feels -- a rudder offset, an asymmetry,
+    the noise -- and say nothing about a prediction at the envelope's edge or beyond): the metric's
+    own errors where two or more such records carry it, else those of the surrogate (the RMS yaw
+    rate) -- ``source`` says which. A held-out replay that diverged counts as an error of log 2 at
+    the farthest distance seen, so that divergence is not left out (assumption).
 
-    Each pair's own identification spread (``own_sd``, :func:`own_spread`: the split's posterior draws replayed
-    through the held-out record) is taken out of its squared error (``prediction_interval.fit_growth``), so that
-    the growth is the error of the model's form alone (see ``prediction_interval``); a pair without a measured
-    spread (its draws failed) keeps its whole error (the conservative side), and so does a divergence.
-    ``net_of_own`` counts the pairs whose spread was taken out."""
+    Each pair's own identification spread (``own_sd``, :func:`own_spread`: the split's posterior
+    draws replayed through the held-out record) is taken out of its squared error
+    (``prediction_interval.fit_growth``), so that the growth is the error of the model's form
+    alone (see ``prediction_interval``); a pair without a measured spread (its draws failed)
+    keeps its whole error (the conservative side), and so does a divergence. ``net_of_own``
+    counts the pairs whose spread was taken out."""
     big = [p for p in cal["pairs"] if p.get("reach", 1.0) >= MIN_REACH]
     own = [p for p in big if metric in p["errors"]]
     use, source = (own, metric) if len(own) >= 2 else ([p for p in big if SURROGATE in p["errors"]], SURROGATE)
@@ -362,8 +381,8 @@ def growth_for(cal: dict, metric: str) -> dict:
 
 # ---------------------------------------------------------------------------------------------- sensitivity
 def coefficient_table(problem, fit, post: dict) -> list:
-    """Per linear unknown of ``post``: name, estimate, posterior sd, anchor value (None: not anchored) and
-    posterior sd over prior sd (None: no prior)."""
+    """Per linear unknown of ``post``: name, estimate, posterior sd, anchor value (None: not
+    anchored) and posterior sd over prior sd (None: no prior)."""
     out = []
     lam = post["prior"][1] if post.get("prior") is not None else None
     for j, n in enumerate(post["names"]):
@@ -377,8 +396,8 @@ def coefficient_table(problem, fit, post: dict) -> list:
 
 
 def sensitivity_sets(post: dict, table: list) -> list:
-    """The coefficient sets of :func:`sensitivities`: per coefficient +1 sd, -1 sd and (when it has one) its
-    anchor value, the others at the posterior mean."""
+    """The coefficient sets of :func:`sensitivities`: per coefficient +1 sd, -1 sd and (when it
+    has one) its anchor value, the others at the posterior mean."""
     mean = dict(zip(post["names"], post["mean"]))
     sets = []
     for row in table:
@@ -390,10 +409,11 @@ def sensitivity_sets(post: dict, table: list) -> list:
 
 
 def sensitivities(table: list, value: float, member_values) -> list:
-    """Rank the coefficients by their share of a metric's variance (see the module docstring), from the
-    metric's values on the :func:`sensitivity_sets` members (three per coefficient, in order). Rows: the
-    table's, with ``per_sd`` (the metric's change for +1 sd), ``share`` and ``reset`` (the change when reset to
-    the anchor value); NaN where a member failed. Sorted by share, largest first."""
+    """Rank the coefficients by their share of a metric's variance (see the module docstring),
+    from the metric's values on the :func:`sensitivity_sets` members (three per coefficient, in
+    order). Rows: the table's, with ``per_sd`` (the metric's change for +1 sd), ``share`` and
+    ``reset`` (the change when reset to the anchor value); NaN where a member failed. Sorted by
+    share, largest first."""
     v = np.asarray(member_values, float)
     if v.shape != (3 * len(table),):
         raise ValueError(f"expected {3 * len(table)} member values (three per coefficient), got {v.shape}")
@@ -411,8 +431,8 @@ def sensitivities(table: list, value: float, member_values) -> list:
 
 
 def turn_members(problem, fit, v, maneuver, coef_sets: list):
-    """(t, out) of a closed-loop manoeuvre (``study.sim.simulate_batch``) of ``fit``'s vessel ``v`` (its rpm and
-    approach speed set) once per coefficient set."""
+    """(t, out) of a closed-loop manoeuvre (``study.sim.simulate_batch``) of ``fit``'s vessel
+    ``v`` (its rpm and approach speed set) once per coefficient set."""
     from ..sim import simulate_batch
 
     if not coef_sets:

@@ -1,18 +1,22 @@
 """The doctor's figures, as PNG bytes (the report embeds them; they are also written beside it).
 
-- ``compare_<record>``: measured u, v, r, psi and the track against the baseline and the final model;
-- ``residuals_time``, ``residuals_states``: the residual forces and moment of the baseline model (inverse
-  dynamics on the training records: measured inertial forces minus the model's), against time and against
-  the states and inputs -- where a missing effect leaves its signature (a current: residuals that follow the
-  heading; a yaw bias: a constant offset; a missing nonlinear term: a curve against v or r);
+- ``compare_<record>``: measured u, v, r, psi and the track against the baseline and the final
+  model;
+- ``residuals_time``, ``residuals_states``: the residual forces and moment of the baseline model
+  (inverse dynamics on the training records: measured inertial forces minus the model's), against
+  time and against the states and inputs -- where a missing effect leaves its signature (a current:
+  residuals that follow the heading; a yaw bias: a constant offset; a missing nonlinear term: a
+  curve against v or r);
 - ``growth``: how the error of each validation record grows along it, the worst windows shaded;
-- ``ladder``: the validation error of each step of the ladder, a rejected step hatched, a diverged one marked;
-- ``metric_intervals``: the turning circles' and zigzags' metrics of the validation records, measured against
-  predicted with 90 % intervals.
+- ``ladder``: the validation error of each step of the ladder, a rejected step hatched, a diverged
+  one marked;
+- ``metric_intervals``: the turning circles' and zigzags' metrics of the validation records,
+  measured against predicted with 90 % intervals.
 
-Made to be read at the report's full width (about 900 px on screen, A4 in print): about 9.5 in wide at
-110 dpi, 10 pt text, a unit on every axis (angles and the yaw rate in degrees, said on the axis), one legend per
-figure naming only what is drawn, and a replay that diverged said in the figure, never drawn at infinity.
+Made to be read at the report's full width (about 900 px on screen, A4 in print): about 9.5 in wide
+at 110 dpi, 10 pt text, a unit on every axis (angles and the yaw rate in degrees, said on the axis),
+one legend per figure naming only what is drawn, and a replay that diverged said in the figure,
+never drawn at infinity.
 """
 from __future__ import annotations
 
@@ -60,7 +64,8 @@ FORCE_UNIT = {"X": "N", "Y": "N", "N": "N m"}
 
 
 def _finite(a) -> np.ndarray:
-    """``a`` as floats with +-inf as NaN (matplotlib leaves a gap there instead of scaling to infinity)."""
+    """``a`` as floats with +-inf as NaN (matplotlib leaves a gap there instead of scaling to
+    infinity)."""
     a = np.asarray(a, dtype=float)
     return np.where(np.isfinite(a), a, np.nan)
 
@@ -76,11 +81,13 @@ def _warn_box(ax, text: str, y: float = 0.5) -> None:
 
 
 def compare(name: str, meas, base, final, base_label: str, final_label: str, pair=()) -> bytes:
-    """Measured u, v, r, psi against time and the track, with the baseline's and the final model's replays.
+    """Measured u, v, r, psi against time and the track, with the baseline's and the final model's
+    replays.
 
-    ``base`` / ``final`` None: not drawn -- a replay that diverged when its label is given (said in the legend
-    and on the panels), no such model when the label is empty (``final`` when no effect was added). ``pair``:
-    up to two more (replay, label), the candidates a weak verdict could not tell apart."""
+    ``base`` / ``final`` None: not drawn -- a replay that diverged when its label is given (said
+    in the legend and on the panels), no such model when the label is empty (``final`` when no
+    effect was added). ``pair``: up to two more (replay, label), the candidates a weak verdict
+    could not tell apart."""
     plt = _plt()
     from matplotlib.lines import Line2D
 
@@ -203,8 +210,9 @@ def residuals_states(res: list, states: tuple) -> bytes:
 
 
 def growth(curves: list, windows: list) -> bytes:
-    """``curves``: per validation record (name, t, baseline's running error, final's or None); ``windows``: the
-    worst windows. A baseline curve that is all NaN is a replay that diverged: said in its panel."""
+    """``curves``: per validation record (name, t, baseline's running error, final's or None);
+    ``windows``: the worst windows. A baseline curve that is all NaN is a replay that diverged:
+    said in its panel."""
     plt = _plt()
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
@@ -259,9 +267,10 @@ def _f(x) -> float:
 
 
 def ladder(steps: list) -> bytes:
-    """Bars of the validation error of each ladder step (dicts with ``step``, ``validation_error`` and
-    optionally ``diverged`` (records), ``rejected``): the baseline red, accepted steps blue, a rejected step
-    hatched, a diverged step (no finite error) a marker and the word "DIVERGED" instead of a bar."""
+    """Bars of the validation error of each ladder step (dicts with ``step``,
+    ``validation_error`` and optionally ``diverged`` (records), ``rejected``): the baseline red,
+    accepted steps blue, a rejected step hatched, a diverged step (no finite error) a marker and
+    the word "DIVERGED" instead of a bar."""
     plt = _plt()
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
@@ -333,9 +342,10 @@ INTERVAL_METRICS = {"tactical_diameter_L": "tactical diameter [L]", "advance_L":
 
 
 def metric_intervals(rows: list) -> bytes | None:
-    """Per manoeuvre metric (:data:`INTERVAL_METRICS`), each validation record's measured value (black) against
-    the final model's prediction with its 90 % interval (blue) and the baseline's (red, open); each panel's title
-    counts the measured values inside the final model's intervals. None when no row has a measured value and an
+    """Per manoeuvre metric (:data:`INTERVAL_METRICS`), each validation record's measured value
+    (black) against the final model's prediction with its 90 % interval (blue) and the baseline's
+    (red, open); each panel's title counts the measured values inside the final model's intervals.
+    None when no row has a measured value and an
     interval."""
     from matplotlib.lines import Line2D
 

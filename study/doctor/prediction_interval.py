@@ -1,50 +1,62 @@
-"""How far a predicted manoeuvre metric can be trusted: the arithmetic of its interval and of the state envelope.
+"""How far a predicted manoeuvre metric can be trusted: the arithmetic of its interval and of the
+state envelope.
 
-A predicted metric (a tactical diameter, an overshoot) is uncertain for three reasons, each measured separately
-(``study.doctor.model_error`` computes them from a fit and its records) and combined here:
+A predicted metric (a tactical diameter, an overshoot) is uncertain for three reasons, each measured
+separately (``study.doctor.model_error`` computes them from a fit and its records) and combined
+here:
 
-(a) **identification spread**: the metric over draws from the fit's posterior (``EffectsProblem.posterior``);
-(b) **structural spread**: the metric over other models that the doctor cannot tell from the chosen one (their
+(a) **identification spread**: the metric over draws from the fit's posterior
+(``EffectsProblem.posterior``); (b) **structural spread**: the metric over other models that the
+doctor cannot tell from the chosen one (their
     training and validation errors within ``tie`` of its own, or lower);
-(c) **extrapolation error**: the relative error of predictions of the training records' harsher manoeuvres by a
-    model identified on their gentler ones, as it grows with the distance outside the training envelope.
+(c) **extrapolation error**: the relative error of predictions of the training records' harsher
+manoeuvres by a
+    model identified on their gentler ones, as it grows with the distance outside the training
+    envelope.
 
-Each component is a standard deviation of the metric's logarithm (a relative error: a tactical diameter 10 % too
-wide is log 1.1 off). How they combine (:func:`combine`) follows from what each measures. Write a prediction's log
-error as eps = eps_id + eps_form: the identification error (the coefficients the records leave uncertain) and the
-error of the model's form (terms it lacks, and how they show beyond the records). *Assumptions, labelled*: the two
-are independent and normal on the log scale, so var(eps) = s_id^2 + s_form^2, and the interval at ``level`` is
-``value * exp(+-z s)`` with s^2 that variance and z the normal quantile (1.645 at 90 %). Then:
+Each component is a standard deviation of the metric's logarithm (a relative error: a tactical
+diameter 10 % too wide is log 1.1 off). How they combine (:func:`combine`) follows from what each
+measures. Write a prediction's log error as eps = eps_id + eps_form: the identification error (the
+coefficients the records leave uncertain) and the error of the model's form (terms it lacks, and how
+they show beyond the records). *Assumptions, labelled*: the two are independent and normal on the
+log scale, so var(eps) = s_id^2 + s_form^2, and the interval at ``level`` is ``value * exp(+-z s)``
+with s^2 that variance and z the normal quantile (1.645 at 90 %). Then:
 
 - (a) estimates s_id directly.
-- (c) measures a held-out prediction's whole error, e = eps_id,ho + eps_form,ho (+ the noise of the measured
-  metric), so E[e^2] = s_id,ho^2 + s_form^2(d) + s_noise^2: it holds an identification spread of its own, which the
-  prediction's (a) already counts. That spread is measured on the held-out fit itself -- its posterior draws
-  replayed through the record it predicts (``model_error.own_spread``) -- and taken out of each pair's squared
-  error before the growth is fitted (:func:`fit_growth`), so s_extrap estimates s_form at the distance d (the
-  measured metric's noise stays in: the measured value a prediction is compared with carries it too). Measured
-  rather than approximated by the main fit's s_id: the held-out fits have fewer records (their spread is the
-  larger), and the held-out metric is often another one (the RMS yaw rate standing in for a turn's diameter).
-- (b) and (c) are two estimates of the same s_form, not two errors: (b) from how far the models the records cannot
-  tell apart disagree at the prediction itself (it sees where the prediction goes, e.g. beyond the farthest
-  held-out record), (c) from how far the model's form actually missed on held-out records (it sees a term all the
-  alternatives lack). Adding them would count the form's error twice; the larger is taken (assumption: neither
-  overstates it), s_form = max(s_struct, s_extrap).
+- (c) measures a held-out prediction's whole error, e = eps_id,ho + eps_form,ho (+ the noise of the
+  measured metric), so E[e^2] = s_id,ho^2 + s_form^2(d) + s_noise^2: it holds an identification
+  spread of its own, which the prediction's (a) already counts. That spread is measured on the
+  held-out fit itself -- its posterior draws replayed through the record it predicts
+  (``model_error.own_spread``) -- and taken out of each pair's squared error before the growth is
+  fitted (:func:`fit_growth`), so s_extrap estimates s_form at the distance d (the measured metric's
+  noise stays in: the measured value a prediction is compared with carries it too). Measured rather
+  than approximated by the main fit's s_id: the held-out fits have fewer records (their spread is
+  the larger), and the held-out metric is often another one (the RMS yaw rate standing in for a
+  turn's diameter).
+- (b) and (c) are two estimates of the same s_form, not two errors: (b) from how far the models the
+  records cannot tell apart disagree at the prediction itself (it sees where the prediction goes,
+  e.g. beyond the farthest held-out record), (c) from how far the model's form actually missed on
+  held-out records (it sees a term all the alternatives lack). Adding them would count the form's
+  error twice; the larger is taken (assumption: neither overstates it), s_form = max(s_struct,
+  s_extrap).
 
-So s^2 = s_id^2 + max(s_struct, s_extrap)^2. Not corrected for: (b)'s alternatives are themselves identified, so
-s_struct holds a little of their identification spread (the wide side); and the held-out pairs are the training
-records' own manoeuvres, so an error the training records share with the prediction is seen by neither.
+So s^2 = s_id^2 + max(s_struct, s_extrap)^2. Not corrected for: (b)'s alternatives are themselves
+identified, so s_struct holds a little of their identification spread (the wide side); and the
+held-out pairs are the training records' own manoeuvres, so an error the training records share with
+the prediction is seen by neither.
 
-The **envelope** of a set of records (:func:`state_envelope`) is, per state, the 99th percentile of |v'|, |r'|, the
-drift angle |beta| and the rudder angle |delta| (v' = v/U, r' = r L/U, beta = atan2(-v, u), U the speed through the
-water), each sample weighted by (U/U0)^4 -- the information it carries about a hull coefficient: the hull force
-scales with the dynamic pressure, U^2, and the information with the force's square -- over samples faster than a
-tenth of U0 (slower ones make v' and r' meaningless), while the propeller runs (at half its median running speed or
-more: a record's end, where the propeller stops and the ship drifts to rest, is no part of its manoeuvre). A record
-at low speed thus hardly widens the envelope of a model identified at speed. The 99th percentile rather than the
-maximum: one noisy sample does not stretch the envelope (assumption). The **distance** of a prediction outside an
-envelope (:func:`envelope_distance`) is the largest relative excess over the states, max_s max(0, x_s / X_s - 1): 0
-inside, 0.5 when one state goes 50 % beyond the records.
+The **envelope** of a set of records (:func:`state_envelope`) is, per state, the 99th percentile of
+|v'|, |r'|, the drift angle |beta| and the rudder angle |delta| (v' = v/U, r' = r L/U, beta =
+atan2(-v, u), U the speed through the water), each sample weighted by (U/U0)^4 -- the information it
+carries about a hull coefficient: the hull force scales with the dynamic pressure, U^2, and the
+information with the force's square -- over samples faster than a tenth of U0 (slower ones make v'
+and r' meaningless), while the propeller runs (at half its median running speed or more: a record's
+end, where the propeller stops and the ship drifts to rest, is no part of its manoeuvre). A record
+at low speed thus hardly widens the envelope of a model identified at speed. The 99th percentile
+rather than the maximum: one noisy sample does not stretch the envelope (assumption). The
+**distance** of a prediction outside an envelope (:func:`envelope_distance`) is the largest relative
+excess over the states, max_s max(0, x_s / X_s - 1): 0 inside, 0.5 when one state goes 50 % beyond
+the records.
 """
 from __future__ import annotations
 
@@ -79,9 +91,10 @@ def _positive(x) -> np.ndarray:
 
 
 def draws_log_sd(draws, level: float = 0.9) -> tuple[float, int]:
-    """(sd of log metric over the posterior draws, number of usable draws): the central ``level`` range of the
-    draws' logarithms over 2 z (a robust sd: one wild draw does not set it). NaN when fewer than half the draws
-    gave a positive finite metric (the rest diverged or never reached it: the spread is then not measurable)."""
+    """(sd of log metric over the posterior draws, number of usable draws): the central ``level``
+    range of the draws' logarithms over 2 z (a robust sd: one wild draw does not set it). NaN
+    when fewer than half the draws gave a positive finite metric (the rest diverged or never
+    reached it: the spread is then not measurable)."""
     d = np.asarray(draws, float).ravel()
     ok = _positive(d)
     if len(d) == 0 or len(ok) < max(2, MIN_FINITE_DRAWS * len(d)):
@@ -92,8 +105,9 @@ def draws_log_sd(draws, level: float = 0.9) -> tuple[float, int]:
 
 
 def structural_log_sd(value: float, alternatives) -> tuple[float, int]:
-    """(root-mean-square of log(alternative / value) over the alternatives that give a positive metric, their
-    number): the spread of the models the records cannot tell apart, about the chosen one. 0 with none."""
+    """(root-mean-square of log(alternative / value) over the alternatives that give a positive
+    metric, their number): the spread of the models the records cannot tell apart, about the
+    chosen one. 0 with none."""
     alt = _positive(alternatives)
     if not (math.isfinite(value) and value > 0) or len(alt) == 0:
         return 0.0, int(len(alt))
@@ -101,15 +115,17 @@ def structural_log_sd(value: float, alternatives) -> tuple[float, int]:
 
 
 def fit_growth(distance, error, own_sd=None) -> dict:
-    """The extrapolation error's growth with the distance outside the training envelope, from held-out pairs:
-    ``error`` the |log(predicted / measured)| of a metric on a record, ``distance`` that record's distance outside
-    the envelope of the records the model was trained on, ``own_sd`` (optional; 0 or NaN where unknown) the
-    held-out prediction's own identification spread, taken out of its squared error (see the module docstring):
-    the target is e^2 - own_sd^2. Model (assumption): the expected target is sigma0^2 + (k d)^2 -- a floor
-    inside the envelope, growing linearly with the distance beyond it; sigma0^2 and k^2 by non-negative least
-    squares on the targets (a pair whose own spread exceeds its error pulls them down: its error was mostly the
-    identification's). Returns ``{'sigma0', 'k', 'n', 'd_max', 'note'}``; with no pair, NaNs; with no pair
-    outside the envelope, k is 0 and the note says the growth is not measured."""
+    """The extrapolation error's growth with the distance outside the training envelope, from
+    held-out pairs: ``error`` the |log(predicted / measured)| of a metric on a record,
+    ``distance`` that record's distance outside the envelope of the records the model was trained
+    on, ``own_sd`` (optional; 0 or NaN where unknown) the held-out prediction's own
+    identification spread, taken out of its squared error (see the module docstring): the target
+    is e^2 - own_sd^2. Model (assumption): the expected target is sigma0^2 + (k d)^2 -- a floor
+    inside the envelope, growing linearly with the distance beyond it; sigma0^2 and k^2 by
+    non-negative least squares on the targets (a pair whose own spread exceeds its error pulls
+    them down: its error was mostly the identification's). Returns ``{'sigma0', 'k', 'n',
+    'd_max', 'note'}``; with no pair, NaNs; with no pair outside the envelope, k is 0 and the
+    note says the growth is not measured."""
     d = np.asarray(distance, float).ravel()
     e = np.asarray(error, float).ravel()
     s = np.zeros_like(e) if own_sd is None else np.asarray(own_sd, float).ravel()
@@ -133,19 +149,21 @@ def fit_growth(distance, error, own_sd=None) -> dict:
 
 
 def extrapolation_log_sd(distance: float, growth: dict) -> float:
-    """sqrt(sigma0^2 + (k d)^2): the extrapolation error at ``distance`` outside the training envelope (see
-    :func:`fit_growth`); NaN when the growth is not calibrated."""
+    """sqrt(sigma0^2 + (k d)^2): the extrapolation error at ``distance`` outside the training
+    envelope (see :func:`fit_growth`); NaN when the growth is not calibrated."""
     s0, k = float(growth.get("sigma0", math.nan)), float(growth.get("k", math.nan))
     d = max(0.0, float(distance)) if math.isfinite(float(distance)) else math.nan
     return float(math.hypot(s0, k * d))
 
 
 def combine(value: float, s_id: float, s_struct: float, s_extrap: float, level: float = 0.9) -> dict:
-    """The interval of ``value`` from the three log-scale sds: s^2 = s_id^2 + max(s_struct, s_extrap)^2 (the
-    identification spread and the error of the model's form, in quadrature; the structural spread and the
-    held-out extrapolation error are two estimates of the latter: see the module docstring). Returns ``{'low', 'high', 'log_sd', 'half_width'}`` (half_width: relative, exp(z s) - 1). A component that
-    is NaN makes the interval NaN (an interval that leaves out what could not be measured would look narrower
-    than it is); a value that is not positive has none (the log scale)."""
+    """The interval of ``value`` from the three log-scale sds: s^2 = s_id^2 + max(s_struct,
+    s_extrap)^2 (the identification spread and the error of the model's form, in quadrature; the
+    structural spread and the held-out extrapolation error are two estimates of the latter: see
+    the module docstring). Returns ``{'low', 'high', 'log_sd', 'half_width'}`` (half_width:
+    relative, exp(z s) - 1). A component that is NaN makes the interval NaN (an interval that
+    leaves out what could not be measured would look narrower than it is); a value that is not
+    positive has none (the log scale)."""
     parts = [float(s_id), float(s_struct), float(s_extrap)]
     if not (math.isfinite(value) and value > 0) or not all(math.isfinite(p) and p >= 0 for p in parts):
         return {"low": math.nan, "high": math.nan, "log_sd": math.nan, "half_width": math.nan}
@@ -157,10 +175,11 @@ def combine(value: float, s_id: float, s_struct: float, s_extrap: float, level: 
 
 # ---------------------------------------------------------------------------------------------- envelope
 def running(frame, measured=None, share: float = PROPELLER_RUNNING):
-    """``frame`` restricted to the samples where the propeller runs at ``share`` of its median running speed or
-    more -- the record's ``n`` (or ``measured``'s, interpolated at the frame's times, for a replay); unchanged
-    without one. The end of a record where the propeller stops and the ship drifts to rest is no part of the
-    manoeuvre its metrics describe, and there v' and r' (over a vanishing speed) run away."""
+    """``frame`` restricted to the samples where the propeller runs at ``share`` of its median
+    running speed or more -- the record's ``n`` (or ``measured``'s, interpolated at the frame's
+    times, for a replay); unchanged without one. The end of a record where the propeller stops
+    and the ship drifts to rest is no part of the manoeuvre its metrics describe, and there v'
+    and r' (over a vanishing speed) run away."""
     src = measured if measured is not None else frame
     if frame is None or src is None or "n" not in getattr(src, "columns", ()):
         return frame
@@ -175,8 +194,8 @@ def running(frame, measured=None, share: float = PROPELLER_RUNNING):
 
 
 def nondimensional_states(df, L: float, U0: float, min_speed: float = MIN_SPEED_U0) -> tuple[dict, np.ndarray]:
-    """({state: |value| per kept sample}, weights (U/U0)^4) of a frame with ``u, v, r`` (and ``delta`` when
-    present) over its samples faster than ``min_speed`` U0."""
+    """({state: |value| per kept sample}, weights (U/U0)^4) of a frame with ``u, v, r`` (and
+    ``delta`` when present) over its samples faster than ``min_speed`` U0."""
     u, v, r = (np.asarray(df[c], float) for c in ("u", "v", "r"))
     U = np.hypot(u, v)
     ok = np.isfinite(U) & np.isfinite(r) & (U > min_speed * U0)
@@ -188,8 +207,8 @@ def nondimensional_states(df, L: float, U0: float, min_speed: float = MIN_SPEED_
 
 
 def weighted_quantile(x, w, q: float) -> float:
-    """The ``q`` quantile of ``x`` with weights ``w`` (the smallest x whose cumulative weight reaches q); NaN
-    for no finite sample."""
+    """The ``q`` quantile of ``x`` with weights ``w`` (the smallest x whose cumulative weight
+    reaches q); NaN for no finite sample."""
     x, w = np.asarray(x, float), np.asarray(w, float)
     ok = np.isfinite(x) & np.isfinite(w) & (w > 0)
     if not ok.any():
@@ -201,9 +220,9 @@ def weighted_quantile(x, w, q: float) -> float:
 
 def state_envelope(frames, L: float, U0: float, q: float = ENVELOPE_QUANTILE,
                    min_speed: float = MIN_SPEED_U0) -> dict:
-    """The envelope of records (one frame or several, pooled): per state of :data:`STATES` the weighted
-    ``q`` quantile of its magnitude over the samples faster than ``min_speed`` U0 (see the module docstring);
-    NaN for a state no frame has."""
+    """The envelope of records (one frame or several, pooled): per state of :data:`STATES` the
+    weighted ``q`` quantile of its magnitude over the samples faster than ``min_speed`` U0 (see
+    the module docstring); NaN for a state no frame has."""
     frames = [frames] if hasattr(frames, "columns") else [f for f in frames if f is not None]
     if not (L > 0 and U0 > 0):
         raise ValueError(f"state_envelope: L={L!r} and U0={U0!r} must be positive")
@@ -219,9 +238,10 @@ def state_envelope(frames, L: float, U0: float, q: float = ENVELOPE_QUANTILE,
 
 
 def envelope_distance(prediction: dict, training: dict) -> dict:
-    """How far ``prediction``'s envelope lies outside ``training``'s: per state the relative excess
-    max(0, x / X - 1) (NaN when either is unknown or the training one is 0), and ``distance`` their largest
-    (NaN when no state could be compared), ``state`` the state that sets it."""
+    """How far ``prediction``'s envelope lies outside ``training``'s: per state the relative
+    excess max(0, x / X - 1) (NaN when either is unknown or the training one is 0), and
+    ``distance`` their largest (NaN when no state could be compared), ``state`` the state that
+    sets it."""
     ex = {}
     for s in STATES:
         x, X = float(prediction.get(s, math.nan)), float(training.get(s, math.nan))
@@ -238,9 +258,10 @@ _MONOMIAL = re.compile(r"^[XYN]([uvrda]+)$")
 
 
 def monomial_of(name: str) -> str | None:
-    """The state product a hull coefficient multiplies, from the kinds' naming (``Yvvr`` multiplies v'^2 r',
-    ``Nrar`` r'|r'|, ``Xdd`` delta^2): its letters v, r, d (rudder), u (surge, as u/U0 - 1); ``a`` (absolute
-    value) adds nothing. None for a coefficient that is no state product (R0, t_R, a wind factor...)."""
+    """The state product a hull coefficient multiplies, from the kinds' naming (``Yvvr``
+    multiplies v'^2 r', ``Nrar`` r'|r'|, ``Xdd`` delta^2): its letters v, r, d (rudder), u
+    (surge, as u/U0 - 1); ``a`` (absolute value) adds nothing. None for a coefficient that is no
+    state product (R0, t_R, a wind factor...)."""
     m = _MONOMIAL.match(str(name))
     if not m or not any(c in m.group(1) for c in "vrd"):
         return None
@@ -263,8 +284,8 @@ def monomial_values(df, letters: str, L: float, U0: float) -> tuple[np.ndarray, 
 
 
 def monomial_reach(frames, letters: str, L: float, U0: float, q: float = ENVELOPE_QUANTILE) -> float:
-    """The weighted ``q`` quantile of |the state product ``letters``| over the frames: how far the records reach
-    in the direction a coefficient acts."""
+    """The weighted ``q`` quantile of |the state product ``letters``| over the frames: how far
+    the records reach in the direction a coefficient acts."""
     frames = [frames] if hasattr(frames, "columns") else [f for f in frames if f is not None]
     xs, ws = zip(*[monomial_values(f, letters, L, U0) for f in frames]) if frames else ((), ())
     return weighted_quantile(np.concatenate(xs), np.concatenate(ws), q) if xs else math.nan

@@ -1,12 +1,13 @@
-"""A predicted manoeuvre metric with its interval and the coefficients that carry it: what the doctor's report
-and ``study.doctor.turn_prediction`` give for every predicted metric.
+"""A predicted manoeuvre metric with its interval and the coefficients that carry it: what the
+doctor's report and ``study.doctor.turn_prediction`` give for every predicted metric.
 
 :func:`metric_interval` combines the three parts (``study.doctor.model_error`` measures them,
-``study.doctor.prediction_interval`` adds them); :func:`carriers` names the coefficients a metric is sensitive to,
-ranked by their share of its variance, and says whether the training records determine each where the prediction
-goes (its posterior sd under half its prior's -- the doctor's rule for "determined" -- and the state product it
-multiplies within the records' reach); :func:`predict_metrics` does both for a closed-loop manoeuvre nobody
-measured (a 35 deg turning circle from a steady approach).
+``study.doctor.prediction_interval`` adds them); :func:`carriers` names the coefficients a metric is
+sensitive to, ranked by their share of its variance, and says whether the training records determine
+each where the prediction goes (its posterior sd under half its prior's -- the doctor's rule for
+"determined" -- and the state product it multiplies within the records' reach);
+:func:`predict_metrics` does both for a closed-loop manoeuvre nobody measured (a 35 deg turning
+circle from a steady approach).
 """
 from __future__ import annotations
 
@@ -57,10 +58,11 @@ def _finite(x) -> bool:
 
 def metric_interval(value: float, draw_values, alt_values, distance: float, growth: dict,
                     level: float = 0.9) -> dict:
-    """One metric's interval and its parts: ``{'low', 'high', 'half_width', 's_id', 's_struct', 's_extrap',
-    'draws', 'alternatives', 'distance', 'growth_source', 'why', 'caveat'}`` (``why``: a reason when it has none;
-    ``caveat``: set when the prediction lies farther outside the envelope than any held-out record did, so that
-    the growth of its error is assumed, not measured)."""
+    """One metric's interval and its parts: ``{'low', 'high', 'half_width', 's_id', 's_struct',
+    's_extrap', 'draws', 'alternatives', 'distance', 'growth_source', 'why', 'caveat'}``
+    (``why``: a reason when it has none; ``caveat``: set when the prediction lies farther outside
+    the envelope than any held-out record did, so that the growth of its error is assumed, not
+    measured)."""
     s_id, n_draws = pi.draws_log_sd(draw_values, level)
     s_struct, n_alt = pi.structural_log_sd(value, alt_values)
     s_ext = pi.extrapolation_log_sd(distance, growth) if _finite(distance) else math.nan
@@ -91,7 +93,8 @@ def _pow(letters: str) -> str:
 
 
 def _identified(ratio) -> str:
-    """The doctor's words for a posterior sd over the prior's (``EffectsProblem.identifiability``)."""
+    """The doctor's words for a posterior sd over the prior's
+    (``EffectsProblem.identifiability``)."""
     if ratio is None:
         return "no prior: set by the records alone"
     if ratio < DETERMINED_RATIO:
@@ -103,12 +106,13 @@ def _identified(ratio) -> str:
 
 def carriers(rows: list, prediction, training_frames, L: float, U0: float, unit: str = "",
              half_width: float = math.inf) -> list:
-    """The coefficients that carry a metric (rows of ``model_error.sensitivities``): those with a share of its
-    variance of at least ``MIN_SHARE``, by share, then those that move it by more than ``half_width`` (the
-    interval's, in the metric's unit) when reset to their anchor value, by that move -- a coefficient the
-    records determine can carry a prediction far from the anchor set's. Each with ``reach_ratio`` (how far the
-    prediction goes in the state product it multiplies, over the training records' reach; None for no state
-    product), ``determined`` (by the records, and within their reach) and a plain ``sentence``."""
+    """The coefficients that carry a metric (rows of ``model_error.sensitivities``): those with a
+    share of its variance of at least ``MIN_SHARE``, by share, then those that move it by more
+    than ``half_width`` (the interval's, in the metric's unit) when reset to their anchor value,
+    by that move -- a coefficient the records determine can carry a prediction far from the
+    anchor set's. Each with ``reach_ratio`` (how far the prediction goes in the state product it
+    multiplies, over the training records' reach; None for no state product), ``determined`` (by
+    the records, and within their reach) and a plain ``sentence``."""
     named = [r for r in rows if _finite(r.get("share")) and r["share"] >= MIN_SHARE]
     moved = sorted([r for r in rows if r not in named and _finite(r.get("reset"))
                     and abs(r["reset"]) > half_width], key=lambda r: -abs(r["reset"]))
@@ -139,8 +143,8 @@ def carriers(rows: list, prediction, training_frames, L: float, U0: float, unit:
 
 
 def extrapolation_text(dist: dict, env_pred: dict, env_train: dict) -> str:
-    """A plain sentence: inside the training envelope, at its edge (no state more than ``EDGE`` beyond it), or
-    which states go how far outside it."""
+    """A plain sentence: inside the training envelope, at its edge (no state more than ``EDGE``
+    beyond it), or which states go how far outside it."""
     names = {"v'": "|v'|", "r'": "|r'|", "drift_deg": "drift angle [deg]", "rudder_deg": "rudder angle [deg]"}
     if not _finite(dist.get("distance")):
         return "the prediction's states could not be compared with the training envelope"
@@ -170,11 +174,12 @@ def _frames(t, out) -> list:
 
 def predict_metrics(problem, fit, v, maneuver, alternatives=(), cal: dict | None = None, draws: int = 64,
                     seed: int = 0, level: float = 0.9) -> dict:
-    """A closed-loop manoeuvre of ``fit``'s vessel ``v`` (its rpm and approach speed set) with every turning
-    metric's interval and carriers. ``alternatives``: (label, problem, fit, vessel) of the models the records
-    cannot tell apart, each turned as it is; ``cal``: ``model_error.calibrate(problem, fit)`` (computed when
-    None). Returns ``{'metrics': {name: {value, low, high, ..., carriers}}, 'extrapolation': {...},
-    'alternatives': [labels], 'frame': the point prediction, 'calibration', 'draw_values': {name: array}}``."""
+    """A closed-loop manoeuvre of ``fit``'s vessel ``v`` (its rpm and approach speed set) with
+    every turning metric's interval and carriers. ``alternatives``: (label, problem, fit, vessel)
+    of the models the records cannot tell apart, each turned as it is; ``cal``:
+    ``model_error.calibrate(problem, fit)`` (computed when None). Returns ``{'metrics': {name:
+    {value, low, high, ..., carriers}}, 'extrapolation': {...}, 'alternatives': [labels],
+    'frame': the point prediction, 'calibration', 'draw_values': {name: array}}``."""
     from ..sim import simulate
 
     L, U0 = problem.L, problem.U0
@@ -209,8 +214,9 @@ def predict_metrics(problem, fit, v, maneuver, alternatives=(), cal: dict | None
 # ------------------------------------------------------------------------------------ a turn nobody measured
 def setup_effects_left_out(problem, fit, facility: str | None = None, scale: str | None = None,
                            keep_setup_effects: bool = False) -> tuple:
-    """(``fit`` for a prediction in ``facility`` at ``scale``, the set-up effects left out, why): the set-up effects
-    are left out unless kept, or the prediction's facility and scale are the training records' own."""
+    """(``fit`` for a prediction in ``facility`` at ``scale``, the set-up effects left out, why):
+    the set-up effects are left out unless kept, or the prediction's facility and scale are the
+    training records' own."""
     from study.records.facility import other_setup, setup_of
 
     drop = [e for e in fit.effects if getattr(problem.effect(e), "setup_effect", False)]
@@ -227,8 +233,8 @@ def setup_effects_left_out(problem, fit, facility: str | None = None, scale: str
 
 
 def turn_vessel(problem, fit, u0: float | None = None, n: float | None = None):
-    """(vessel, n): ``fit``'s model ready to turn from a steady approach at ``u0`` (default the vessel's U0), its
-    propeller at ``n`` (default its own self-propulsion point at ``u0``)."""
+    """(vessel, n): ``fit``'s model ready to turn from a steady approach at ``u0`` (default the
+    vessel's U0), its propeller at ``n`` (default its own self-propulsion point at ``u0``)."""
     v = problem.vessel(fit.effects, fit.values, coefs=fit.coefs, replay=False)
     u0 = float(problem.U0 if u0 is None else u0)
     if n is None:
@@ -239,10 +245,11 @@ def turn_vessel(problem, fit, u0: float | None = None, n: float | None = None):
 
 
 def default_alternatives(problem, fit, tie: float = 0.1) -> tuple:
-    """([(label, problem, fit)], notes): the models as defensible as ``fit`` that need no other records -- its
-    anchor's sd halved and doubled; the anchor set itself when it fits the training records within ``tie``; and,
-    when the problem's catalogue has ``hull_nonlinear`` and the model lacks hull terms, the model with them freed
-    (another structure) when it fits within ``tie`` or better (``study.doctor.model_error``)."""
+    """([(label, problem, fit)], notes): the models as defensible as ``fit`` that need no other
+    records -- its anchor's sd halved and doubled; the anchor set itself when it fits the
+    training records within ``tie``; and, when the problem's catalogue has ``hull_nonlinear`` and
+    the model lacks hull terms, the model with them freed (another structure) when it fits within
+    ``tie`` or better (``study.doctor.model_error``)."""
     alts = me.anchor_variants(problem, fit)
     pub, why = me.published_set(problem, fit, tie)
     notes = [why] if why else []
@@ -262,20 +269,24 @@ def predict_turn(problem, fit, u0: float | None = None, n: float | None = None, 
                  maneuver="turning_35", level: float = 0.9, facility: str | None = None,
                  scale: str | None = None, keep_setup_effects: bool = False, alternatives=None,
                  model_error: bool = True, tie: float = 0.1, cal: dict | None = None) -> dict:
-    """Tactical diameter, advance and transfer [L] of ``fit``'s model in ``maneuver`` from a steady approach at
-    ``u0`` (default: the vessel's U0), each with its ``level`` interval; set-up effects left out for another
-    ``facility`` or ``scale`` unless ``keep_setup_effects`` (see the module's docstring).
+    """Tactical diameter, advance and transfer [L] of ``fit``'s model in ``maneuver`` from a steady
+    approach at ``u0`` (default: the vessel's U0), each with its ``level`` interval; set-up effects
+    left out for another ``facility`` or ``scale`` unless ``keep_setup_effects`` (see the module's
+    docstring).
 
-    ``alternatives``: (label, problem, fit) of other models the records cannot tell apart (the caller's choice,
-    e.g. other effects); None: :func:`default_alternatives`. Each turns at its own self-propulsion point unless
-    ``n`` is given. ``cal``: ``study.doctor.model_error.calibrate(problem, fit)`` when already computed.
+    ``alternatives``: (label, problem, fit) of other models the records cannot tell apart (the
+    caller's choice, e.g. other effects); None: :func:`default_alternatives`. Each turns at its own
+    self-propulsion point unless ``n`` is given. ``cal``:
+    ``study.doctor.model_error.calibrate(problem, fit)`` when already computed.
     ``model_error=False``: the identification spread alone (``td_low``, ``td_high``).
 
-    Returns ``{'tactical_diameter_L', 'advance_L', 'transfer_L', 'td_low', 'td_high', 'td_draws_median', 'n',
-    'u0', 'draws', 'finite_draws', 'setup_left_out', 'setup_why', 'metrics', 'extrapolation', 'alternatives',
-    'notes'}``: ``td_low``/``td_high`` the central ``level`` share of the posterior draws' tactical diameters
-    (identification spread only); ``metrics[name]`` the combined interval (``low``, ``high`` and its parts,
-    ``study.doctor.predictions.metric_interval``) and the coefficients that carry it (``carriers``)."""
+    Returns ``{'tactical_diameter_L', 'advance_L', 'transfer_L', 'td_low', 'td_high',
+    'td_draws_median', 'n', 'u0', 'draws', 'finite_draws', 'setup_left_out', 'setup_why',
+    'metrics', 'extrapolation', 'alternatives', 'notes'}``: ``td_low``/``td_high`` the central
+    ``level`` share of the posterior draws' tactical diameters (identification spread only);
+    ``metrics[name]`` the combined interval (``low``, ``high`` and its parts,
+    ``study.doctor.predictions.metric_interval``) and the coefficients that carry it
+    (``carriers``)."""
 
     fit, left_out, why = setup_effects_left_out(problem, fit, facility, scale, keep_setup_effects)
     v, n_used = turn_vessel(problem, fit, u0, n)

@@ -1,10 +1,11 @@
-"""The doctor's report written: the figures, ``report.json`` and ``report.html`` of a finished diagnosis
-(:func:`write_report`: a :class:`.report_schema.Report`, serialised once), with what goes into them beside the
-ranking and the ladder (:mod:`.diagnose`): each record's replays, the worst windows, the manoeuvre metrics of each
-candidate, the conventions and definitions, the catalogue and the provenance (package, git revision, command line,
-date, each record's sha256).
+"""The doctor's report written: the figures, ``report.json`` and ``report.html`` of a finished
+diagnosis (:func:`write_report`: a :class:`.report_schema.Report`, serialised once), with what goes
+into them beside the ranking and the ladder (:mod:`.diagnose`): each record's replays, the worst
+windows, the manoeuvre metrics of each candidate, the conventions and definitions, the catalogue and
+the provenance (package, git revision, command line, date, each record's sha256).
 
-``doctor`` is a finished :class:`.diagnose.Doctor` (not imported here: the diagnosis is the layer above)."""
+``doctor`` is a finished :class:`.diagnose.Doctor` (not imported here: the diagnosis is the layer
+above)."""
 from __future__ import annotations
 
 import math
@@ -16,7 +17,8 @@ from .report_schema import Report
 
 
 def _running_error(meas, pred) -> np.ndarray | None:
-    """Mean over u, v, r, psi of |predicted - measured| / spread of the measured channel, at each sample."""
+    """Mean over u, v, r, psi of |predicted - measured| / spread of the measured channel, at each
+    sample."""
     if pred is None:
         return None
     t = meas["time"].to_numpy()
@@ -30,8 +32,8 @@ def _running_error(meas, pred) -> np.ndarray | None:
 
 
 def worst_windows(curves: list, n: int = 3) -> list:
-    """The ``n`` windows (10 % of a record, at least 10 samples) with the largest mean error, at most one per
-    record first, then the next ones; from the baseline's running errors."""
+    """The ``n`` windows (10 % of a record, at least 10 samples) with the largest mean error, at
+    most one per record first, then the next ones; from the baseline's running errors."""
     cands = []
     for name, t, err, _ in curves:
         if err is None or len(err) < 20:
@@ -52,7 +54,8 @@ def worst_windows(curves: list, n: int = 3) -> list:
 
 
 def predictions(doctor, ev) -> dict:
-    """Each validation record's prediction by an evaluation's model (the fold's model when held out)."""
+    """Each validation record's prediction by an evaluation's model (the fold's model when held
+    out)."""
     out = {}
     if doctor.mode == "given":
         for name, df, info in zip(doctor.val_names, doctor.val_df, doctor.val_infos):
@@ -65,9 +68,9 @@ def predictions(doctor, ev) -> dict:
 
 
 def manoeuvre_predictions(doctor, ev, whole: dict) -> dict:
-    """The replays the manoeuvre metrics compare: a record whose manoeuvre starts after an approach
-    (``maneuver_metrics.manoeuvre_start``) replayed from the measured state at that start; any other record's
-    whole-record replay (``whole``, from :func:`predictions`)."""
+    """The replays the manoeuvre metrics compare: a record whose manoeuvre starts after an
+    approach (``maneuver_metrics.manoeuvre_start``) replayed from the measured state at that
+    start; any other record's whole-record replay (``whole``, from :func:`predictions`)."""
     from study.records.maneuver_metrics import manoeuvre_start
 
     out = dict(whole)
@@ -93,10 +96,11 @@ def _metrics_error(rows: list, col: str) -> tuple:
 
 
 def candidate_metrics(doctor, rep: dict, meas: dict, mb: dict) -> None:
-    """Beside each ranked candidate's validation error, its effect on the validation manoeuvres' metrics (tactical
-    diameter, advance, overshoots...: ``study.records.maneuver_metrics``): the mean relative error of the metrics the
-    baseline and the candidate can both be measured on, and a note when the candidate lowers the NRMSE but worsens
-    the metrics. Without turning circles or zigzags among the validation records a row gets none."""
+    """Beside each ranked candidate's validation error, its effect on the validation manoeuvres'
+    metrics (tactical diameter, advance, overshoots...: ``study.records.maneuver_metrics``): the
+    mean relative error of the metrics the baseline and the candidate can both be measured on,
+    and a note when the candidate lowers the NRMSE but worsens the metrics. Without turning
+    circles or zigzags among the validation records a row gets none."""
     from study.records.maneuver_metrics import maneuver_metrics
 
     given = tuple(doctor.result["base"].effects)
@@ -125,9 +129,10 @@ def candidate_metrics(doctor, rep: dict, meas: dict, mb: dict) -> None:
 
 
 def write_report(doctor, out_dir, vessel: str, model: str, overwrite: bool = False) -> dict:
-    """Write ``report.json``, ``report.html`` and the figures (``figures/*.png``) into ``out_dir``; returns the
-    report as ``report.json`` holds it (:meth:`.report_schema.Report.to_dict`). Refuses to replace an existing
-    report unless ``overwrite``."""
+    """Write ``report.json``, ``report.html`` and the figures (``figures/*.png``) into
+    ``out_dir``; returns the report as ``report.json`` holds it
+    (:meth:`.report_schema.Report.to_dict`). Refuses to replace an existing report unless
+    ``overwrite``."""
     from pathlib import Path
 
     from .html import render_html
@@ -156,8 +161,9 @@ def write_report(doctor, out_dir, vessel: str, model: str, overwrite: bool = Fal
 
 
 def _figures(doctor, rep: dict, meas: dict, pb: dict, pf: dict) -> tuple:
-    """(figure name -> PNG bytes, their listing for the page, the worst windows) of a report: measured against
-    predicted per record, the residual forces, the error's growth along each record and the ladder."""
+    """(figure name -> PNG bytes, their listing for the page, the worst windows) of a report:
+    measured against predicted per record, the residual forces, the error's growth along each
+    record and the ladder."""
     from . import plots
     from ..identify.with_effects import residuals
 
@@ -211,8 +217,9 @@ def _figures(doctor, rep: dict, meas: dict, pb: dict, pf: dict) -> tuple:
 
 
 def _manoeuvres(doctor, rep: dict, meas: dict, pb: dict, pf: dict) -> tuple:
-    """(the manoeuvre metrics rows of every record, baseline and final, with their intervals; the predicted
-    turns and what carries them); each candidate's effect on the metrics is added to ``rep``'s ranking."""
+    """(the manoeuvre metrics rows of every record, baseline and final, with their intervals; the
+    predicted turns and what carries them); each candidate's effect on the metrics is added to
+    ``rep``'s ranking."""
     from study.records.maneuver_metrics import maneuver_metrics
     from .uncertainty import annotate
 
@@ -228,8 +235,8 @@ def _manoeuvres(doctor, rep: dict, meas: dict, pb: dict, pf: dict) -> tuple:
 
 
 def _interval_figure(mm: list, figs: dict, listing: list) -> None:
-    """Add the figure of the manoeuvre metrics measured against predicted with their 90 % intervals, when any
-    validation record has such a metric."""
+    """Add the figure of the manoeuvre metrics measured against predicted with their 90 %
+    intervals, when any validation record has such a metric."""
     from . import plots
 
     data = plots.metric_intervals(mm)
@@ -245,8 +252,9 @@ def _interval_figure(mm: list, figs: dict, listing: list) -> None:
 
 
 def _put_figures(out, figs: dict) -> None:
-    """Write the figures into ``out/figures``: to a temporary folder first, moved in at once, so a doctor stopped
-    meanwhile leaves no figures/ that would make a rerun refuse ("already holds figures") though no report
+    """Write the figures into ``out/figures``: to a temporary folder first, moved in at once, so a
+    doctor stopped meanwhile leaves no figures/ that would make a rerun refuse ("already holds
+    figures") though no report
     exists."""
     import os
     import shutil
@@ -285,7 +293,8 @@ DEFINITIONS = {
 
 
 def record_sha256(record) -> tuple:
-    """(sha256 hex digest, of what): of the record's file as read when it has one, else of its data as CSV."""
+    """(sha256 hex digest, of what): of the record's file as read when it has one, else of its
+    data as CSV."""
     import hashlib
     from pathlib import Path
 
@@ -301,7 +310,8 @@ def record_sha256(record) -> tuple:
 
 
 def git_revision() -> dict:
-    """The package's git revision and whether its tracked files differ from it; None when it is not a checkout."""
+    """The package's git revision and whether its tracked files differ from it; None when it is
+    not a checkout."""
     import subprocess
     from pathlib import Path
 
@@ -319,8 +329,9 @@ def git_revision() -> dict:
 
 
 def provenance(doctor, command: str | None = None) -> dict:
-    """What made the report: package and version, git revision, command line, date (UTC), and each record's
-    sha256 (its file's bytes when the report is written; a record without a file: its data as CSV)."""
+    """What made the report: package and version, git revision, command line, date (UTC), and
+    each record's sha256 (its file's bytes when the report is written; a record without a file:
+    its data as CSV)."""
     import shlex
     import sys
     from datetime import datetime, timezone
@@ -345,8 +356,8 @@ def provenance(doctor, command: str | None = None) -> dict:
 
 
 def catalogue_rows(doctor) -> list:
-    """The catalogue of the doctor's candidate effects: physics, parameters with units, how each enters, source,
-    and why it could not act here (if so)."""
+    """The catalogue of the doctor's candidate effects: physics, parameters with units, how each
+    enters, source, and why it could not act here (if so)."""
     out = []
     for name, eff in doctor.effects.items():
         out.append({"name": name, "physics": eff.physics, "parameters": eff.param_text(doctor.problem),
@@ -362,7 +373,8 @@ def _slug(s: str) -> str:
 
 
 def _jsonable(x):
-    """Floats stay floats (inf/NaN as JSON's Infinity/NaN, which Python reads), numpy scalars become numbers."""
+    """Floats stay floats (inf/NaN as JSON's Infinity/NaN, which Python reads), numpy scalars
+    become numbers."""
     if isinstance(x, dict):
         return {str(k): _jsonable(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):

@@ -1,13 +1,15 @@
-"""The doctor's report as one schema: :class:`Report`, whose fields are the top-level keys of ``report.json`` in
-their order, and the rows with a stable shape (a ranked candidate, a ladder step, a manoeuvre metric...) as
+"""The doctor's report as one schema: :class:`Report`, whose fields are the top-level keys of
+``report.json`` in their order, and the rows with a stable shape (a ranked candidate, a ladder step,
+a manoeuvre metric...) as
 ``TypedDict``.
 
 A report is serialised once (:meth:`Report.to_dict`, :meth:`Report.to_json`) and read back once
-(:meth:`Report.from_dict`), which refuses a report whose key is missing or of the wrong type with one line naming
-it (:class:`ReportError`). A key the doctor has written from its first version on is required; a key added later
-is optional (None when a report does not have it), so older reports still read. What the report does not type
-beyond ``dict[str, Any]`` (a model's parameters and errors, the prediction uncertainty, the rudder residual, the
-separating manoeuvre's scores) is owned by the module that writes it and read by name where it is shown.
+(:meth:`Report.from_dict`), which refuses a report whose key is missing or of the wrong type with
+one line naming it (:class:`ReportError`). A key the doctor has written from its first version on is
+required; a key added later is optional (None when a report does not have it), so older reports
+still read. What the report does not type beyond ``dict[str, Any]`` (a model's parameters and
+errors, the prediction uncertainty, the rudder residual, the separating manoeuvre's scores) is owned
+by the module that writes it and read by name where it is shown.
 """
 # no ``from __future__ import annotations``: ``TypedDict`` reads ``NotRequired`` from evaluated annotations only
 import json
@@ -22,7 +24,8 @@ __all__ = ["CatalogueRow", "ErrorRow", "FigureEntry", "IdentifiabilityRow", "Lad
 
 
 class ReportError(ValueError):
-    """A report that does not follow the schema: a key missing or of the wrong type (one line, naming it)."""
+    """A report that does not follow the schema: a key missing or of the wrong type (one line,
+    naming it)."""
 
 
 # --------------------------------------------------------------------------------------------- the rows
@@ -128,8 +131,9 @@ class FigureEntry(TypedDict):
 
 
 class ManoeuvreMetricRow(TypedDict):
-    """A manoeuvre metric of a validation record, measured and predicted (``maneuver_metrics``; the rows of
-    ``study.records.maneuver_metrics.maneuver_metrics`` with their intervals from ``study.doctor.uncertainty``)."""
+    """A manoeuvre metric of a validation record, measured and predicted (``maneuver_metrics``;
+    the rows of ``study.records.maneuver_metrics.maneuver_metrics`` with their intervals from
+    ``study.doctor.uncertainty``)."""
 
     record: str
     metric: str  # tactical_diameter, first_overshoot...
@@ -147,7 +151,8 @@ class ManoeuvreMetricRow(TypedDict):
 
 
 class IdentifiabilityRow(TypedDict):
-    """An anchored coefficient of the baseline fit, and whether the records determine it (``identifiability``)."""
+    """An anchored coefficient of the baseline fit, and whether the records determine it
+    (``identifiability``)."""
 
     coefficient: str
     prior: float
@@ -160,7 +165,8 @@ class IdentifiabilityRow(TypedDict):
 
 
 class SeparatingManoeuvre(TypedDict):
-    """The manoeuvre that would best tell the two leading candidates apart (``separating_maneuver``; written by
+    """The manoeuvre that would best tell the two leading candidates apart (``separating_maneuver``;
+    written by
     ``study.doctor.separating``)."""
 
     pair: list[str]  # the two candidates
@@ -206,8 +212,8 @@ class Provenance(TypedDict):
 
 @dataclass(kw_only=True)
 class Report:
-    """The doctor's report: the fields are the keys of ``report.json``, in its order. Optional fields (keys
-    added after the first reports) are None when a report does not have them."""
+    """The doctor's report: the fields are the keys of ``report.json``, in its order. Optional
+    fields (keys added after the first reports) are None when a report does not have them."""
 
     verdict: str  # the one-line verdict
     baseline: ModelSummary  # the model as given (with the user's effects)
@@ -255,13 +261,14 @@ class Report:
                 if f.name != "absent" and f.name not in self.absent}
 
     def to_json(self) -> str:
-        """``report.json``'s text: indented, ``Infinity``/``NaN`` for an infinite or undefined number."""
+        """``report.json``'s text: indented, ``Infinity``/``NaN`` for an infinite or undefined
+        number."""
         return json.dumps(self.to_dict(), indent=1, allow_nan=True, default=float)
 
     @classmethod
     def from_dict(cls, d: Any) -> "Report":
-        """The report of a ``report.json`` read: refused (:class:`ReportError`, one line naming the key) when a
-        required key is missing, a key is unknown or one has the wrong type."""
+        """The report of a ``report.json`` read: refused (:class:`ReportError`, one line naming
+        the key) when a required key is missing, a key is unknown or one has the wrong type."""
         if isinstance(d, Report):
             return d
         if not isinstance(d, dict):

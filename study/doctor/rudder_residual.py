@@ -1,18 +1,21 @@
-"""The residual yaw moment against the rudder angle: what a model misses of the rudder's force, per rudder-angle bin.
+"""The residual yaw moment against the rudder angle: what a model misses of the rudder's force, per
+rudder-angle bin.
 
-:func:`residual_by_rudder` bins the inverse-dynamics residuals of a fit (``study.identify.with_effects.residuals``:
-the measured inertial forces minus the model's at the training rows) by the rudder angle and gives per bin the
-mean non-dimensional residual N' (by 0.5 rho L^2 d U0^2) and Y' (by 0.5 rho L d U0^2), with the spread of the bin
-means (largest minus smallest) and the RMS of N'. A model whose rudder force is right leaves bin means that do
-not change with the rudder angle; a rudder too weak or too strong leaves a ramp, a rudder force that differs to
-port and to starboard (the flow straightening gamma_R of Yasukawa & Yoshimura 2015, eq. 24, taken as one value
-where the ship has two) a kink at zero. A dict of plain numbers, for a report's data.
+:func:`residual_by_rudder` bins the inverse-dynamics residuals of a fit
+(``study.identify.with_effects.residuals``: the measured inertial forces minus the model's at the
+training rows) by the rudder angle and gives per bin the mean non-dimensional residual N' (by 0.5
+rho L^2 d U0^2) and Y' (by 0.5 rho L d U0^2), with the spread of the bin means (largest minus
+smallest) and the RMS of N'. A model whose rudder force is right leaves bin means that do not change
+with the rudder angle; a rudder too weak or too strong leaves a ramp, a rudder force that differs to
+port and to starboard (the flow straightening gamma_R of Yasukawa & Yoshimura 2015, eq. 24, taken as
+one value where the ship has two) a kink at zero. A dict of plain numbers, for a report's data.
 
-``python -m study rudder_residual`` writes the KVLCC2 case (HSVA's zigzags, the doctor's training records in
-``study.doctor.examples``; ``../shared/data/real``) to ``<out>/kvlcc2_rudder_residual.{json,md}`` (default
-``rudder_residual/`` in the current folder): the published set and the hull identified from the records (the
-doctor's anchor, 30 %), each with no effect, the yaw bias, the rudder's inflow free, both, and the propeller from
-the measured thrust; with the validation error on the doctor's validation records.
+``python -m study rudder_residual`` writes the KVLCC2 case (HSVA's zigzags, the doctor's training
+records in ``study.doctor.examples``; ``../shared/data/real``) to
+``<out>/kvlcc2_rudder_residual.{json,md}`` (default ``rudder_residual/`` in the current folder): the
+published set and the hull identified from the records (the doctor's anchor, 30 %), each with no
+effect, the yaw bias, the rudder's inflow free, both, and the propeller from the measured thrust;
+with the validation error on the doctor's validation records.
 """
 from __future__ import annotations
 
@@ -28,8 +31,9 @@ EFFECT_SETS = ((), ("yaw_bias",), ("rudder_inflow",), ("yaw_bias", "rudder_inflo
 
 
 def residual_by_rudder(problem, fit, names=None, bins=BINS_DEG) -> dict:
-    """Per rudder-angle bin (edges ``bins`` [deg]) the mean residual N' and Y' of ``fit`` on ``problem``'s
-    training rows and the number of rows; the spread of the N' bin means and the RMS of N' over all rows."""
+    """Per rudder-angle bin (edges ``bins`` [deg]) the mean residual N' and Y' of ``fit`` on
+    ``problem``'s training rows and the number of rows; the spread of the N' bin means and the
+    RMS of N' over all rows."""
     from ..identify.with_effects import residuals
 
     names = names or [i.name for i in problem.infos]
@@ -50,7 +54,8 @@ def residual_by_rudder(problem, fit, names=None, bins=BINS_DEG) -> dict:
 
 
 def kvlcc2_hsva(data_dir=None) -> dict:
-    """The KVLCC2 case (see the module docstring): model -> effects -> residual table, errors, parameters."""
+    """The KVLCC2 case (see the module docstring): model -> effects -> residual table, errors,
+    parameters."""
     from study.configuration.compose import read_config
     from ..identify.with_effects import EffectsProblem, identify_effects, record_errors, validation_error
     from study.records.loaders import load_records, real_data_dir

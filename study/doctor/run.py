@@ -1,10 +1,10 @@
-"""The model doctor run from a resolved configuration (``conf/diagnose.yaml``): what ``python -m study diagnose``,
-its worked examples (``study.doctor.examples``) and the tests call.
+"""The model doctor run from a resolved configuration (``conf/diagnose.yaml``): what ``python -m
+study diagnose``, its worked examples (``study.doctor.examples``) and the tests call.
 
-``run(conf)`` checks the settings, reads the records (``study.records.loaders.load_records``), holds the output folder
-(``claimed``), runs the doctor (``study.doctor.diagnose``), writes its report and logs each ladder step as a run
-of the results table (``log_runs``, study ``doctor``); ``diagnose_conf(**over)`` composes the configuration as
-the command does.
+``run(conf)`` checks the settings, reads the records (``study.records.loaders.load_records``), holds
+the output folder (``claimed``), runs the doctor (``study.doctor.diagnose``), writes its report and
+logs each ladder step as a run of the results table (``log_runs``, study ``doctor``);
+``diagnose_conf(**over)`` composes the configuration as the command does.
 """
 from __future__ import annotations
 
@@ -17,8 +17,9 @@ from study.records.loaders import load_records
 
 
 def diagnose_conf(**over) -> dict:
-    """The doctor's configuration as ``python -m study diagnose`` composes it (``vessel``, ``model`` as its
-    overrides), the other keys of ``over`` set on it; its runs are not logged in the results table."""
+    """The doctor's configuration as ``python -m study diagnose`` composes it (``vessel``,
+    ``model`` as its overrides), the other keys of ``over`` set on it; its runs are not logged in
+    the results table."""
     conf = compose("diagnose", [f"{k}={v}" for k, v in over.items() if k in ("vessel", "model")])
     conf.update(log_runs=False, overwrite=False)
     conf.update({k: v for k, v in over.items() if k not in ("vessel", "model")})
@@ -44,7 +45,8 @@ def _use_rudder(records, column: str) -> None:
 
 
 def _truths(records) -> dict:
-    """Effect parameters hidden in simulated records' metadata (a test or study can then compare)."""
+    """Effect parameters hidden in simulated records' metadata (a test or study can then
+    compare)."""
     out = {}
     for r in records:
         for e in r.meta.get("hidden_effects") or []:
@@ -90,8 +92,8 @@ def log_runs(conf: dict, doctor, rep: dict, train, validate) -> list:
 
 
 def _check_place(conf: dict) -> None:
-    """The vessel config's ``facility`` (one of ``study.records.facility.FACILITIES``) and ``keep_setup_effects`` (a
-    boolean), refused in one line before any work."""
+    """The vessel config's ``facility`` (one of ``study.records.facility.FACILITIES``) and
+    ``keep_setup_effects`` (a boolean), refused in one line before any work."""
     from study.configuration.cli import ConfigError
     from study.records.facility import check
 
@@ -104,9 +106,10 @@ def _check_place(conf: dict) -> None:
 
 @contextlib.contextmanager
 def claimed(out: Path, overwrite: bool):
-    """Hold ``out`` for one doctor while it works: a second one writing into the same folder is refused at once
-    (an exclusive lock, ``<out>/.report.lock``, released when the process ends however it ends), and the folder
-    is checked again for a report under the lock (another run may have finished one meanwhile)."""
+    """Hold ``out`` for one doctor while it works: a second one writing into the same folder is
+    refused at once (an exclusive lock, ``<out>/.report.lock``, released when the process ends
+    however it ends), and the folder is checked again for a report under the lock (another run
+    may have finished one meanwhile)."""
     import shutil
 
     from filelock import FileLock, Timeout

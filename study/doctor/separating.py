@@ -1,26 +1,30 @@
 """Which manoeuvre would tell two explanations apart.
 
-When the doctor cannot tell two candidate effects apart (or names one on weak evidence), each candidate's fit is
-simulated through a menu of standard manoeuvres -- the 10/10, 20/20, 20/10 and 35/35 zigzags and the 10 and 35
-deg turning circles, each to starboard and to port, from a steady approach at the service speed and at 60 % of it
--- from the heading the records start at, and the manoeuvres are ranked by how far the two predictions differ
-against the records' measurement noise. The same score is computed for the records already run (each fit
-replayed through them), so the recommendation says how much more a new record would tell than the ones in hand.
+When the doctor cannot tell two candidate effects apart (or names one on weak evidence), each
+candidate's fit is simulated through a menu of standard manoeuvres -- the 10/10, 20/20, 20/10 and
+35/35 zigzags and the 10 and 35 deg turning circles, each to starboard and to port, from a steady
+approach at the service speed and at 60 % of it -- from the heading the records start at, and the
+manoeuvres are ranked by how far the two predictions differ against the records' measurement noise.
+The same score is computed for the records already run (each fit replayed through them), so the
+recommendation says how much more a new record would tell than the ones in hand.
 
-The score of a manoeuvre is how far apart the two predictions lie, in units of how far the fits already miss the
+The score of a manoeuvre is how far apart the two predictions lie, in units of how far the fits
+already miss the
 records:
 
     S = sqrt( mean_t sum_c ((a_c(t) - b_c(t)) / s_c)^2 ),
 
-over the velocities both simulate and the records hold (u, v, r), where s_c is the larger of the channel's white
-measurement noise (the difference method, :func:`study.records.state_estimation.noise_std`) and the RMS misfit of the
-first candidate's replays of the records in hand. Heading and positions are left out: they integrate the
-velocities, so any small difference between two fits grows along a long manoeuvre. Why the misfit and not the
-sensor noise alone: on real records the model's own error is far larger than the sensors' (and velocities derived
-from positions are smooth), so two fits that differ by less than they already miss cannot be told apart by one more
-record, however long. Assumption, labelled: a manoeuvre separates the two when S is above :data:`SEPARATES` (their
-predictions differ by more than twice what either misses the records by); each fit is taken as exact (its own
-identification spread is left out).
+over the velocities both simulate and the records hold (u, v, r), where s_c is the larger of the
+channel's white measurement noise (the difference method,
+:func:`study.records.state_estimation.noise_std`) and the RMS misfit of the first candidate's
+replays of the records in hand. Heading and positions are left out: they integrate the velocities,
+so any small difference between two fits grows along a long manoeuvre. Why the misfit and not the
+sensor noise alone: on real records the model's own error is far larger than the sensors' (and
+velocities derived from positions are smooth), so two fits that differ by less than they already
+miss cannot be told apart by one more record, however long. Assumption, labelled: a manoeuvre
+separates the two when S is above :data:`SEPARATES` (their predictions differ by more than twice
+what either misses the records by); each fit is taken as exact (its own identification spread is
+left out).
 """
 from __future__ import annotations
 
@@ -40,8 +44,9 @@ SEPARATES = 2.0
 
 
 def channel_noise(records: list) -> dict:
-    """Each channel's white-noise sd over the records (the median of the records' difference-method estimates);
-    channels whose estimate is zero (noise-free or quantised to nothing) are left out."""
+    """Each channel's white-noise sd over the records (the median of the records'
+    difference-method estimates); channels whose estimate is zero (noise-free or quantised to
+    nothing) are left out."""
     from study.records.state_estimation import noise_std
 
     out = {}
@@ -54,8 +59,9 @@ def channel_noise(records: list) -> dict:
 
 
 def separation(a: pd.DataFrame, b: pd.DataFrame, scale: dict) -> dict:
-    """``S`` of two predictions of one manoeuvre (on ``a``'s time grid, ``b`` interpolated), the channel that carries
-    most of it and the largest difference, each in units of ``scale`` (per channel)."""
+    """``S`` of two predictions of one manoeuvre (on ``a``'s time grid, ``b`` interpolated), the
+    channel that carries most of it and the largest difference, each in units of ``scale`` (per
+    channel)."""
     t = a["time"].to_numpy(float)
     tb = b["time"].to_numpy(float)
     keep = t <= tb[-1]
@@ -73,8 +79,8 @@ def separation(a: pd.DataFrame, b: pd.DataFrame, scale: dict) -> dict:
 
 
 def misfit(problem, fit, records: list, infos=None) -> dict:
-    """Each channel's RMS of the records minus ``fit``'s replays of them (on the replays' time grid), over the
-    records whose replay does not diverge."""
+    """Each channel's RMS of the records minus ``fit``'s replays of them (on the replays' time
+    grid), over the records whose replay does not diverge."""
     sq = {c: [] for c in CHANNELS}
     for i, df in enumerate(records):
         pred = problem.predict(fit, df, infos[i] if infos is not None else None)
@@ -118,16 +124,18 @@ def separating_maneuvers(problem, fits: dict, records: list, names: list, infos=
     ----------
     problem : study.identify.with_effects.EffectsProblem
     fits : {label: Fit}, two of them (e.g. the two candidate effects the doctor cannot tell apart)
-    records, names : the measured records (DataFrames) and their names: the noise, the starting heading and the
+    records, names : the measured records (DataFrames) and their names: the noise, the starting
+    heading and the
         sampling interval come from them, and each is scored too (both fits replayed through it)
     infos : the records' RecordInfo (depth), in order; None: from the records
 
     Returns
     -------
     dict
-        ``pair`` (the two labels), ``sigma`` (noise sd per channel), ``menu`` (rows best first: maneuver, side,
-        speed_U0, D, channel, max_sd, or ``diverged`` naming the fit that does), ``recorded`` (the same for the
-        records in hand), ``best`` (the top row) and ``text`` (one sentence for the report).
+        ``pair`` (the two labels), ``sigma`` (noise sd per channel), ``menu`` (rows best first:
+        maneuver, side, speed_U0, D, channel, max_sd, or ``diverged`` naming the fit that does),
+        ``recorded`` (the same for the records in hand), ``best`` (the top row) and ``text`` (one
+        sentence for the report).
     """
     (la, fa), (lb, fb) = list(fits.items())[:2]
     noise, miss = channel_noise(records), misfit(problem, fa, records, infos)
@@ -154,7 +162,8 @@ def separating_maneuvers(problem, fits: dict, records: list, names: list, infos=
 
 
 def _scored(pred: dict, scale: dict) -> dict:
-    """:func:`separation` of the two predictions ``{label: frame or None}``, or which of them diverged."""
+    """:func:`separation` of the two predictions ``{label: frame or None}``, or which of them
+    diverged."""
     (la, pa), (lb, pb) = pred.items()
     if pa is None or pb is None:
         return {"S": float("nan"), "channel": None, "max": float("nan"),

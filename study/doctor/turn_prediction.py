@@ -1,36 +1,40 @@
 """What an identified model predicts for a manoeuvre nobody measured, and how sure it can be.
 
 :func:`predict_turn` (``study.doctor.predictions``, re-exported here) simulates a fitted model
-(:class:`study.identify.with_effects.EffectsProblem` and one of its fits) through a 35 deg turning circle (IMO
-MSC.137(76)) from a steady approach, and gives the tactical diameter, advance and transfer, each with a 90 %
-interval that holds model error as well as the identification's spread, how far the turn lies outside the
-training records' envelope, and the coefficients that carry it. The draws and the sensitivity members run in one
-compiled batch (``study.sim.simulate_batch``).
+(:class:`study.identify.with_effects.EffectsProblem` and one of its fits) through a 35 deg turning
+circle (IMO MSC.137(76)) from a steady approach, and gives the tactical diameter, advance and
+transfer, each with a 90 % interval that holds model error as well as the identification's spread,
+how far the turn lies outside the training records' envelope, and the coefficients that carry it.
+The draws and the sensitivity members run in one compiled batch (``study.sim.simulate_batch``).
 
 Choices, labelled:
 
-- *Propeller*: by default the model's **own self-propulsion point** at the approach speed (the rpm at which it
-  runs straight at that speed, SIMMAN 2008's rule for the free-running turns: "the RPM such that the ship is in
-  longitudinal equilibrium"); an identified model whose resistance differs from the published set's then turns
-  at another rpm than the published set does. ``n`` gives a fixed rpm instead (e.g. the tank's). The draws turn at
-  the point estimate's rpm (their own resistance differs little: R'0 is among the best-determined coefficients);
-  every other model at its own.
-- *Set-up effects*: an effect of the training records' test set-up (``setup_effect``: a yaw bias, a rudder zero
-  offset; ``study.records.facility``) is left out of a turn predicted for another facility or scale: ``facility`` names
-  the facility the turn is predicted for (None: not stated, taken as another set-up than the training records',
-  since a manoeuvre nobody measured was not run in their set-up), ``keep_setup_effects`` keeps them. The result
-  says which were left out (``setup_left_out``).
-- *Interval* (``study.doctor.predictions.METHOD``): the posterior draws' spread, the spread over models the
-  records cannot tell apart, and an extrapolation error calibrated on the training records (held out in turn, net
-  of the held-out fits' own identification spread) that grows with the distance outside their envelope; on the
-  log scale s^2 = s_id^2 + max(s_struct, s_extrap)^2, the last two being two estimates of the model's form error
-  (an assumption; ``study.doctor.prediction_interval``).
-  ``td_low``/``td_high`` keep the draws' interval alone (identification spread only), for comparison.
+- *Propeller*: by default the model's **own self-propulsion point** at the approach speed (the rpm
+  at which it runs straight at that speed, SIMMAN 2008's rule for the free-running turns: "the RPM
+  such that the ship is in longitudinal equilibrium"); an identified model whose resistance differs
+  from the published set's then turns at another rpm than the published set does. ``n`` gives a
+  fixed rpm instead (e.g. the tank's). The draws turn at the point estimate's rpm (their own
+  resistance differs little: R'0 is among the best-determined coefficients); every other model at
+  its own.
+- *Set-up effects*: an effect of the training records' test set-up (``setup_effect``: a yaw bias, a
+  rudder zero offset; ``study.records.facility``) is left out of a turn predicted for another
+  facility or scale: ``facility`` names the facility the turn is predicted for (None: not stated,
+  taken as another set-up than the training records', since a manoeuvre nobody measured was not run
+  in their set-up), ``keep_setup_effects`` keeps them. The result says which were left out
+  (``setup_left_out``).
+- *Interval* (``study.doctor.predictions.METHOD``): the posterior draws' spread, the spread over
+  models the records cannot tell apart, and an extrapolation error calibrated on the training
+  records (held out in turn, net of the held-out fits' own identification spread) that grows with
+  the distance outside their envelope; on the log scale s^2 = s_id^2 + max(s_struct, s_extrap)^2,
+  the last two being two estimates of the model's form error (an assumption;
+  ``study.doctor.prediction_interval``). ``td_low``/``td_high`` keep the draws' interval alone
+  (identification spread only), for comparison.
 
-``python -m study turn_prediction`` writes the KVLCC2 case (HSVA's zigzags, ``../shared/data/real``) to
-``<out>/kvlcc2_turn_from_zigzags.{md,csv}`` (default ``turn_prediction/`` in the current folder; the committed
-table: ``--out paper_figs/doctor --overwrite``): the published set against the hull identified from the zigzags
-under the doctor's settings and under other reasonable ones, each turned to both sides.
+``python -m study turn_prediction`` writes the KVLCC2 case (HSVA's zigzags, ``../shared/data/real``)
+to ``<out>/kvlcc2_turn_from_zigzags.{md,csv}`` (default ``turn_prediction/`` in the current folder;
+the committed table: ``--out paper_figs/doctor --overwrite``): the published set against the hull
+identified from the zigzags under the doctor's settings and under other reasonable ones, each turned
+to both sides.
 """
 from __future__ import annotations
 
@@ -65,8 +69,9 @@ CASES = (
 
 
 def _case_alternatives(cases: list, k: int, tie: float = 0.1) -> list:
-    """The other identified cases that fit HSVA's records within ``tie`` of case ``k`` or better (training
-    misfit without the anchor's penalty) with no effect parameter on a bound, as (label, problem, fit)."""
+    """The other identified cases that fit HSVA's records within ``tie`` of case ``k`` or better
+    (training misfit without the anchor's penalty) with no effect parameter on a bound, as
+    (label, problem, fit)."""
     from .model_error import at_bounds, data_error
 
     _, pb, fit, _ = cases[k]
@@ -80,10 +85,11 @@ def _case_alternatives(cases: list, k: int, tie: float = 0.1) -> list:
 
 
 def kvlcc2_hsva_table(data_dir=None, draws: int = 64) -> pd.DataFrame:
-    """The published KVLCC2 set against hulls identified from HSVA's nine 1-5 deg switch zigzags (the doctor's
-    training records in ``study.doctor.examples``), each turned at 35 deg to both sides from HSVA's approach
-    speed at its own self-propulsion rpm (with the interval of :func:`predict_turn`; the other identified cases
-    that fit as well count among its alternatives), and to starboard at HSVA's measured rpm."""
+    """The published KVLCC2 set against hulls identified from HSVA's nine 1-5 deg switch zigzags
+    (the doctor's training records in ``study.doctor.examples``), each turned at 35 deg to both
+    sides from HSVA's approach speed at its own self-propulsion rpm (with the interval of
+    :func:`predict_turn`; the other identified cases that fit as well count among its
+    alternatives), and to starboard at HSVA's measured rpm."""
     from ..identify.effects import list_effects, registry
     from ..identify.with_effects import EffectsProblem, Fit, identify_effects
     from study.records.loaders import load_records, real_data_dir

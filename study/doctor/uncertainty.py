@@ -1,18 +1,20 @@
-"""The doctor's predicted manoeuvre metrics with their intervals, how far each prediction extrapolates and which
-coefficients carry it (the method: ``study.doctor.predictions.METHOD``).
+"""The doctor's predicted manoeuvre metrics with their intervals, how far each prediction
+extrapolates and which coefficients carry it (the method: ``study.doctor.predictions.METHOD``).
 
-For the baseline and the final model, every ``maneuver_metrics`` row of a validation record gets ``<model>_low`` and
-``<model>_high`` (the 90 % interval) and ``<model>_uncertainty`` (its parts); the final model's rows get
-``carriers`` (all but the lengths in metres, whose twins in ship lengths have them) and the record's
-``extrapolation``. The models the doctor cannot tell apart from one of them are the other models it fitted whose
-training and (scored) validation errors are within ``tie`` of that model's or lower -- its candidates, ladder steps
-and their equation-error twins, minus the physically implausible ones and those whose effect parameters sit on a
-bound of their search box (``model_error.at_bounds``: not identified) -- plus, with validation records given, the
-model's anchor halved and doubled and the anchor set itself when it fits the training records as well. With each
-record held out in turn (no validation records) each record is predicted by its fold's fits, and the extrapolation
-error is calibrated once on all training records (an approximation: the folds' own calibrations would each leave one
-record out). ``predicted_turns`` adds what the final model predicts for a standard 35 deg turning circle to either
-side from a steady approach at the service speed, a manoeuvre nobody measured
+For the baseline and the final model, every ``maneuver_metrics`` row of a validation record gets
+``<model>_low`` and ``<model>_high`` (the 90 % interval) and ``<model>_uncertainty`` (its parts);
+the final model's rows get ``carriers`` (all but the lengths in metres, whose twins in ship lengths
+have them) and the record's ``extrapolation``. The models the doctor cannot tell apart from one of
+them are the other models it fitted whose training and (scored) validation errors are within ``tie``
+of that model's or lower -- its candidates, ladder steps and their equation-error twins, minus the
+physically implausible ones and those whose effect parameters sit on a bound of their search box
+(``model_error.at_bounds``: not identified) -- plus, with validation records given, the model's
+anchor halved and doubled and the anchor set itself when it fits the training records as well. With
+each record held out in turn (no validation records) each record is predicted by its fold's fits,
+and the extrapolation error is calibrated once on all training records (an approximation: the folds'
+own calibrations would each leave one record out). ``predicted_turns`` adds what the final model
+predicts for a standard 35 deg turning circle to either side from a steady approach at the service
+speed, a manoeuvre nobody measured
 (``study.doctor.predictions.predict_turn``).
 """
 from __future__ import annotations
@@ -45,8 +47,8 @@ def calibration(doctor, fit) -> dict:
 
 
 def alternative_evaluations(doctor, ev, tie: float) -> tuple:
-    """([(label, Evaluation)], [excluded sentences]): the doctor's other fits that the records cannot tell from
-    ``ev`` (see the module docstring)."""
+    """([(label, Evaluation)], [excluded sentences]): the doctor's other fits that the records
+    cannot tell from ``ev`` (see the module docstring)."""
     scored = doctor.result["scored"]
     implausible = {r["effect"] for r in doctor.result["ranking"] if r.get("implausible")}
     own_v, own_t = _mean_on(ev, scored), ev.training_error
@@ -71,8 +73,9 @@ def alternative_evaluations(doctor, ev, tie: float) -> tuple:
 
 
 def setting_alternatives(doctor, fit, tie: float) -> tuple:
-    """([(label, problem, fit)], notes): the anchor halved and doubled, and the anchor set when it fits the
-    training records within ``tie`` (``study.doctor.model_error``); computed once per fit."""
+    """([(label, problem, fit)], notes): the anchor halved and doubled, and the anchor set when
+    it fits the training records within ``tie`` (``study.doctor.model_error``); computed once per
+    fit."""
     cache = doctor.__dict__.setdefault("_settings", {})
     if id(fit) not in cache:
         alts = me.anchor_variants(doctor.problem, fit)
@@ -101,9 +104,10 @@ def _record_values(doctor, name, df, frames) -> list:
 
 def model_uncertainty(doctor, ev, rows: list, frames: dict, role: str, tie: float, level: float = 0.9,
                       sensitivity: bool = False) -> dict:
-    """Fill ``<role>_low``, ``<role>_high`` and ``<role>_uncertainty`` of the ``maneuver_metrics`` rows of the
-    model ``ev`` (``frames``: its replays, by record), and with ``sensitivity`` the rows' ``carriers`` and the
-    records' extrapolation. Returns the section's part for this model."""
+    """Fill ``<role>_low``, ``<role>_high`` and ``<role>_uncertainty`` of the
+    ``maneuver_metrics`` rows of the model ``ev`` (``frames``: its replays, by record), and with
+    ``sensitivity`` the rows' ``carriers`` and the records' extrapolation. Returns the section's
+    part for this model."""
     from study.records.maneuver_metrics import manoeuvre_start
 
     pb0 = doctor.problem
@@ -166,8 +170,9 @@ def model_uncertainty(doctor, ev, rows: list, frames: dict, role: str, tie: floa
 
 
 def calibration_summary(cal: dict) -> dict:
-    """The calibration as the report shows it: the splits, the held-out pairs (record, distance, the metrics'
-    errors and the held-out predictions' own identification spreads, taken out of them) and the surrogate's
+    """The calibration as the report shows it: the splits, the held-out pairs (record, distance, the
+    metrics' errors and the held-out predictions' own identification spreads, taken out of them) and
+    the surrogate's
     growth."""
     return {"splits": cal["splits"], "growth": me.growth_for(cal, me.SURROGATE),
             "pairs": [{"record": p["record"], "split": p["split"], "distance": p["distance"],
@@ -176,8 +181,9 @@ def calibration_summary(cal: dict) -> dict:
 
 
 def predicted_turns(doctor, ev, tie: float, level: float = 0.9) -> list:
-    """The final model's 35 deg turns to either side (``TURNS``), each with its metrics' intervals and carriers
-    and its extrapolation; the models the doctor cannot tell apart from it turn as they are."""
+    """The final model's 35 deg turns to either side (``TURNS``), each with its metrics'
+    intervals and carriers and its extrapolation; the models the doctor cannot tell apart from it
+    turn as they are."""
     from .predictions import predict_turn
 
     alts = [(label, doctor.problem, e.fit) for label, e in alternative_evaluations(doctor, ev, tie)[0]]
@@ -201,8 +207,9 @@ def predicted_turns(doctor, ev, tie: float, level: float = 0.9) -> list:
 
 
 def annotate(doctor, mm: list, base, final, mb: dict, mf: dict, level: float = 0.9) -> dict:
-    """Fill the intervals of the ``maneuver_metrics`` rows ``mm`` (baseline and final; the final's carriers and
-    extrapolation) and return the report's ``prediction_uncertainty`` section."""
+    """Fill the intervals of the ``maneuver_metrics`` rows ``mm`` (baseline and final; the
+    final's carriers and extrapolation) and return the report's ``prediction_uncertainty``
+    section."""
     tie = doctor.opt.tie
     sec = {"level": level, "method": METHOD, "errors": []}
     parts = (("final", lambda: model_uncertainty(doctor, final, mm, mf, "final", tie, level, sensitivity=True)),
@@ -221,8 +228,8 @@ def annotate(doctor, mm: list, base, final, mb: dict, mf: dict, level: float = 0
 
 
 def summary(mm: list, sec: dict) -> list:
-    """Plain sentences: which predictions extrapolate (how far, in which states) and which coefficients carry
-    them; how often the intervals hold the measured value."""
+    """Plain sentences: which predictions extrapolate (how far, in which states) and which
+    coefficients carry them; how often the intervals hold the measured value."""
     out = []
     names = {"v'": "|v'|", "r'": "|r'|", "drift_deg": "drift", "rudder_deg": "rudder"}
     far = {n: r for n, r in sec["final"]["records"].items() if r.get("text", "").startswith("EXTRAPOLATES")}

@@ -1,16 +1,18 @@
-"""``python -m study figures``: rebuild ``paper_figs/`` and ``paper_figs/CLAIMS.md`` from the results table.
+"""``python -m study figures``: rebuild ``paper_figs/`` and ``paper_figs/CLAIMS.md`` from the
+results table.
 
-Reads ``<results>/runs.parquet``, ``params.parquet`` (rebuilt from the records if missing) and the artefacts of
-the runs (``<results>/artefacts/<run_id>/``: correlation matrices, L-curves, online convergence, emcee chains,
-validation traces and posterior-predictive bands). Nothing is simulated or fitted here: every number is one the
-runs logged. Each named study (``conf/experiment/<name>.yaml``, its figures and claim in
-``study/figures/studies/<name>.py``) that has finished runs in the table is rebuilt into ``paper_figs/<name>/``; its
-outputs and claim are listed in ``paper_figs/<name>/index.json``, from which the folder's ``README.md`` and
-``CLAIMS.md`` are composed. **A rebuild never destroys**: a study without runs in the table keeps its folder,
-its index and its rows of ``README.md`` and ``CLAIMS.md`` as they are; a rebuilt study's folder loses only the
-files this rebuild no longer writes. Figures are written as PNG and PDF, tables as CSV and Markdown, byte-stable
-between rebuilds (no dates or software versions in the files, a fixed SVG hash salt, fixed float formats,
-deterministic row order).
+Reads ``<results>/runs.parquet``, ``params.parquet`` (rebuilt from the records if missing) and the
+artefacts of the runs (``<results>/artefacts/<run_id>/``: correlation matrices, L-curves, online
+convergence, emcee chains, validation traces and posterior-predictive bands). Nothing is simulated
+or fitted here: every number is one the runs logged. Each named study
+(``conf/experiment/<name>.yaml``, its figures and claim in ``study/figures/studies/<name>.py``) that
+has finished runs in the table is rebuilt into ``paper_figs/<name>/``; its outputs and claim are
+listed in ``paper_figs/<name>/index.json``, from which the folder's ``README.md`` and ``CLAIMS.md``
+are composed. **A rebuild never destroys**: a study without runs in the table keeps its folder, its
+index and its rows of ``README.md`` and ``CLAIMS.md`` as they are; a rebuilt study's folder loses
+only the files this rebuild no longer writes. Figures are written as PNG and PDF, tables as CSV and
+Markdown, byte-stable between rebuilds (no dates or software versions in the files, a fixed SVG hash
+salt, fixed float formats, deterministic row order).
 
 Usage::
 
@@ -51,15 +53,15 @@ def _files(path: str) -> list[str]:
 
 
 def _claim_key(c: dict, seeds: dict) -> tuple:
-    """Seed papers' claims first, by seed number, then the harness's own, by study name; a study's claims in the
-    order it made them (sorted() is stable)."""
+    """Seed papers' claims first, by seed number, then the harness's own, by study name; a
+    study's claims in the order it made them (sorted() is stable)."""
     seed = seeds.get(c["study"])
     return (0, seed, c["study"]) if seed else (1, "", c["study"])
 
 
 def read_indexes(out: Path) -> dict[str, dict]:
-    """study -> its index (``{'study', 'runs', 'outputs': [{'path', 'what'}], 'claims': [...]}``) of every study folder in
-    ``out``, whether rebuilt now or before."""
+    """study -> its index (``{'study', 'runs', 'outputs': [{'path', 'what'}], 'claims': [...]}``)
+    of every study folder in ``out``, whether rebuilt now or before."""
     found = {}
     for p in sorted(out.glob(f"*/{INDEX}")):
         try:
@@ -150,9 +152,10 @@ def write_claims(out: Path, indexes: dict, not_built: list, seeds: dict) -> None
 
 
 def study_slice(runs: pd.DataFrame, params: pd.DataFrame, name: str) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """One study's finished and failed runs and their parameter rows, as stored (not yet joined), without the columns that
-    are empty for every one of its rows (another study's settings): the same frames whether they come from a
-    results folder that holds many studies or from the study's own committed table."""
+    """One study's finished and failed runs and their parameter rows, as stored (not yet joined),
+    without the columns that are empty for every one of its rows (another study's settings): the
+    same frames whether they come from a results folder that holds many studies or from the
+    study's own committed table."""
     # failed runs are kept: a claim counts a failed fit as a loss of its method, never drops it
     r = runs[(runs["cfg_study"] == name) & runs["status"].isin(["ok", "failed"])] if len(runs) else runs
     q = params[params["run_id"].isin(set(r["run_id"]))] if len(params) else params
@@ -164,8 +167,8 @@ def study_slice(runs: pd.DataFrame, params: pd.DataFrame, name: str) -> tuple[pd
 
 
 def run_config(row: pd.Series) -> dict:
-    """The part of a run's configuration its code fingerprint depends on (``study.store.fingerprint.entries``), read back
-    from its row of the runs table."""
+    """The part of a run's configuration its code fingerprint depends on
+    (``study.store.fingerprint.entries``), read back from its row of the runs table."""
     def val(col):
         v = row.get(col)
         if isinstance(v, str) and v[:1] in "[{":
@@ -182,8 +185,9 @@ def run_config(row: pd.Series) -> dict:
 
 
 def code_status(runs: pd.DataFrame) -> dict:
-    """Which runs of a table the code on disk would compute the same way: each run's stored code fingerprint against
-    the fingerprint of its configuration now (``study.store.fingerprint``), with the revisions that computed them."""
+    """Which runs of a table the code on disk would compute the same way: each run's stored code
+    fingerprint against the fingerprint of its configuration now (``study.store.fingerprint``),
+    with the revisions that computed them."""
     from study.store import fingerprint
 
     if not len(runs):
@@ -197,9 +201,9 @@ def code_status(runs: pd.DataFrame) -> dict:
 
 
 def datasets_per_cell(runs: pd.DataFrame) -> dict:
-    """How many datasets each configuration (cell) of a study's table holds: the smallest and largest over the cells
-    where something is drawn at random (measurement noise), and how many cells are one dataset by construction (no
-    noise: every replicate would be the same records)."""
+    """How many datasets each configuration (cell) of a study's table holds: the smallest and
+    largest over the cells where something is drawn at random (measurement noise), and how many
+    cells are one dataset by construction (no noise: every replicate would be the same records)."""
     cfg = [c for c in runs.columns if c.startswith("cfg_") and c != "cfg_seed"]  # a seed sweep is datasets too
     if not len(runs) or not cfg:
         return {}
@@ -211,10 +215,11 @@ def datasets_per_cell(runs: pd.DataFrame) -> dict:
 
 
 def build_study(b: Builder, module, runs_raw, params_raw, table: bool = True) -> dict:
-    """Rebuild one study into ``<out>/<name>/``: its outputs, then its index; files of that folder this rebuild
-    did not write (outputs a changed study no longer makes) are removed, nothing outside it is touched. With
-    ``table``, the study's table goes into ``<out>/<name>/table/`` (its finished runs, their parameters and the
-    artefacts its figures read), from which ``python -m study figures`` rebuilds it on a fresh clone."""
+    """Rebuild one study into ``<out>/<name>/``: its outputs, then its index; files of that
+    folder this rebuild did not write (outputs a changed study no longer makes) are removed,
+    nothing outside it is touched. With ``table``, the study's table goes into
+    ``<out>/<name>/table/`` (its finished runs, their parameters and the artefacts its figures
+    read), from which ``python -m study figures`` rebuilds it on a fresh clone."""
     name = module.NAME
     r_raw, p_raw = study_slice(runs_raw, params_raw, name)
     runs, params = prepare_tables(r_raw, p_raw)
@@ -241,8 +246,9 @@ def build_study(b: Builder, module, runs_raw, params_raw, table: bool = True) ->
 
 
 def write_study_table(d: Path, runs: pd.DataFrame, params: pd.DataFrame, b: Builder) -> None:
-    """``d/runs.parquet``, ``d/params.parquet`` and ``d/artefacts/<run_id>/<name>`` for the artefacts read; any
-    other file under ``d`` is removed. Written through a temporary name and replaced, never half-written."""
+    """``d/runs.parquet``, ``d/params.parquet`` and ``d/artefacts/<run_id>/<name>`` for the
+    artefacts read; any other file under ``d`` is removed. Written through a temporary name and
+    replaced, never half-written."""
     d.mkdir(parents=True, exist_ok=True)
     wanted = {Path("runs.parquet"), Path("params.parquet")}
     for df, fname in ((runs, "runs.parquet"), (params, "params.parquet")):
@@ -267,9 +273,9 @@ def write_study_table(d: Path, runs: pd.DataFrame, params: pd.DataFrame, b: Buil
 
 
 def committed_tables(out: Path) -> dict:
-    """study -> (runs, params, table folder) of every study table committed under ``out`` (``<study>/table/``).
-    Each study is rebuilt from its own table alone: concatenated, the tables' column types would mix and the
-    study's table would not come back to the same bytes."""
+    """study -> (runs, params, table folder) of every study table committed under ``out``
+    (``<study>/table/``). Each study is rebuilt from its own table alone: concatenated, the
+    tables' column types would mix and the study's table would not come back to the same bytes."""
     from ..store import read_table
 
     found = {}
@@ -280,8 +286,9 @@ def committed_tables(out: Path) -> dict:
 
 
 def generic_figures(b: Builder, runs, params, named: set, results: Path) -> None:
-    """The generic figures (``study.figures.generic``) of the runs in ``results`` that no named study claims: those
-    of no study go to ``<out>/<results folder name>/``, those of a study without a module to ``<out>/<study>/``."""
+    """The generic figures (``study.figures.generic``) of the runs in ``results`` that no named
+    study claims: those of no study go to ``<out>/<results folder name>/``, those of a study
+    without a module to ``<out>/<study>/``."""
     from . import generic
 
     if not len(runs):
@@ -297,9 +304,9 @@ def generic_figures(b: Builder, runs, params, named: set, results: Path) -> None
 
 
 def build(results: Path | None, out: Path, table: bool = True, only: set | None = None) -> Builder:
-    """Rebuild the outputs of every study found in the results table (``results``; None: the study tables
-    committed under ``out``), or of the studies in ``only``; compose README.md and CLAIMS.md from every study's
-    index in ``out`` (rebuilt now or before)."""
+    """Rebuild the outputs of every study found in the results table (``results``; None: the
+    study tables committed under ``out``), or of the studies in ``only``; compose README.md and
+    CLAIMS.md from every study's index in ``out`` (rebuilt now or before)."""
     from ..store import ResultStore
     from .studies import discover
 

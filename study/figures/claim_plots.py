@@ -1,5 +1,5 @@
-"""The evidence of a dataset-unit verdict, drawn whole: one point per dataset, one method's error against the
-other's on the same records."""
+"""The evidence of a dataset-unit verdict, drawn whole: one point per dataset, one method's error
+against the other's on the same records."""
 from __future__ import annotations
 
 import math
@@ -14,10 +14,11 @@ __all__ = ["paired_datasets_figure"]
 
 def paired_datasets_figure(b: Builder, study: str, panels: list, a: str, b_: str, name: str, what: str,
                            title: str, metric: str = "median |relative error| of the run's coefficients"):
-    """One point per dataset: method ``a``'s error against ``b_``'s on the same records, log-log, one panel per
-    ``(label, errors)`` (``errors``: rows = datasets, columns include ``a`` and ``b_``, as
-    :func:`study.figures.verdicts.dataset_errors` returns them; inf = a failed fit, drawn at the panel's edge).
-    Below the diagonal ``a`` wins. The evidence of a dataset-unit verdict, shown whole."""
+    """One point per dataset: method ``a``'s error against ``b_``'s on the same records, log-log,
+    one panel per ``(label, errors)`` (``errors``: rows = datasets, columns include ``a`` and
+    ``b_``, as :func:`study.figures.verdicts.dataset_errors` returns them; inf = a failed fit,
+    drawn at the panel's edge). Below the diagonal ``a`` wins. The evidence of a dataset-unit
+    verdict, shown whole."""
     plt = _plt()
     panels = [(lab, e) for lab, e in panels if a in e and b_ in e and len(e)]
     if not panels:

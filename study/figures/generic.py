@@ -1,10 +1,11 @@
-"""Figures for any sweep: what ``python -m study figures`` builds from runs that no named study claims.
+"""Figures for any sweep: what ``python -m study figures`` builds from runs that no named study
+claims.
 
-A sweep of one's own (``python -m study -m structure=euler,central estimator=ls,ridge ...``) gets a comparison of
-whatever it varied: the coefficient error of every dataset by estimator and structure, the held-out prediction
-error of each validation manoeuvre, the fit time, and the multicollinearity of the regressors. Each point of the
-error figures is one run (one dataset); boxes show their spread, so a sweep with ``replicates=N`` shows how much
-of a difference is the data's.
+A sweep of one's own (``python -m study -m structure=euler,central estimator=ls,ridge ...``) gets a
+comparison of whatever it varied: the coefficient error of every dataset by estimator and structure,
+the held-out prediction error of each validation manoeuvre, the fit time, and the multicollinearity
+of the regressors. Each point of the error figures is one run (one dataset); boxes show their
+spread, so a sweep with ``replicates=N`` shows how much of a difference is the data's.
 """
 from __future__ import annotations
 
@@ -19,7 +20,8 @@ _DATA_COLUMNS = ("cfg_seed", "cfg_results_dir", "cfg_progress", "cfg_study")
 
 
 def varied(runs: pd.DataFrame) -> list:
-    """The configuration columns that take more than one value among ``runs`` (what the sweep compared)."""
+    """The configuration columns that take more than one value among ``runs`` (what the sweep
+    compared)."""
     out = []
     for c in runs.columns:
         if c.startswith("cfg_") and c not in _DATA_COLUMNS and runs[c].astype(str).nunique() > 1:
@@ -76,8 +78,8 @@ def _by_estimator_and_structure(b: Builder, runs: pd.DataFrame, name: str, metri
 
 
 def build(b: Builder, runs: pd.DataFrame, params: pd.DataFrame, name: str) -> list:
-    """The generic figures of ``runs`` (finished runs of one sweep) under ``<out>/<name>/``; what was built, one
-    line each (the reason when nothing could be)."""
+    """The generic figures of ``runs`` (finished runs of one sweep) under ``<out>/<name>/``; what
+    was built, one line each (the reason when nothing could be)."""
     made = []
     r = runs[runs["status"] == "ok"] if "status" in runs else runs
     if not len(r):

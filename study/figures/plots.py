@@ -1,8 +1,9 @@
-"""Generic figure and table builders of ``python -m study figures``: where outputs go (:class:`Builder`: PNG and PDF
-figures, CSV and Markdown tables, byte-stable between rebuilds), the results table as the figures read it
-(:func:`load_tables`), and the plots and tables several studies share (drift heatmaps, fit times, collinearity,
-validation traces, L-curves, online convergence, emcee posteriors). A study's own figures and its claim live in
-its module of :mod:`study.figures.studies`; how every figure looks (colours and markers per estimator and
+"""Generic figure and table builders of ``python -m study figures``: where outputs go
+(:class:`Builder`: PNG and PDF figures, CSV and Markdown tables, byte-stable between rebuilds),
+the results table as the figures read it (:func:`load_tables`), and the plots and tables several
+studies share (drift heatmaps, fit times, collinearity, validation traces, L-curves, online
+convergence, emcee posteriors). A study's own figures and its claim live in its module of
+:mod:`study.figures.studies`; how every figure looks (colours and markers per estimator and
 structure, fonts, log ticks, units) is :mod:`study.figures.style`."""
 from __future__ import annotations
 
@@ -53,7 +54,8 @@ def _plt():
 
 
 def _wrap(text: str, width: int = 100) -> str:
-    """A figure title broken into lines that fit the figure (about 100 characters of 10 pt on PRINT_WIDTH_IN)."""
+    """A figure title broken into lines that fit the figure (about 100 characters of 10 pt on
+    PRINT_WIDTH_IN)."""
     return "\n".join(textwrap.wrap(text, width, break_on_hyphens=False))
 
 
@@ -123,15 +125,16 @@ class Builder:
 
 
 def load_tables(results: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(runs, params) of the finished runs, params joined with the run columns the figures group by."""
+    """(runs, params) of the finished runs, params joined with the run columns the figures group
+    by."""
     from ..store import ResultStore
 
     return prepare_tables(*ResultStore(results).load())
 
 
 def prepare_tables(runs: pd.DataFrame, params: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """The tables as the figures read them: finished runs only, params joined with the run columns the figures
-    group by."""
+    """The tables as the figures read them: finished runs only, params joined with the run
+    columns the figures group by."""
     if not len(runs):
         return runs, params
     runs = runs[runs["status"] == "ok"].copy()
@@ -152,9 +155,9 @@ def prepare_tables(runs: pd.DataFrame, params: pd.DataFrame) -> tuple[pd.DataFra
 
 
 def finest(df: pd.DataFrame) -> tuple[pd.DataFrame, list]:
-    """(the rows at the finest sampling interval swept, ``m_sample_dt_LU``; the other intervals, finest first):
-    figures that show one set-up show it at one named interval, never one picked by run-id order. A table
-    without the column (written before it existed) is returned whole."""
+    """(the rows at the finest sampling interval swept, ``m_sample_dt_LU``; the other intervals,
+    finest first): figures that show one set-up show it at one named interval, never one picked
+    by run-id order. A table without the column (written before it existed) is returned whole."""
     if "m_sample_dt_LU" not in df or not df["m_sample_dt_LU"].notna().any():
         return df, []
     dts = sorted(df["m_sample_dt_LU"].dropna().unique())
@@ -166,11 +169,12 @@ def _hT(x) -> str:
 
 
 def at_sampling(df: pd.DataFrame, which: str = "finest") -> pd.DataFrame:
-    """The rows of a figure that shows one sampling interval: the finest (``which='finest'``) or the coarsest of
-    the intervals the sweep asked for (``cfg_noise.sample_dt_LU``, in L/U0). Selected by the requested value, not
-    the realised one (``m_sample_dt_LU``): each vessel and speed decimates the request to its own nearest step,
-    so the realised finest value can belong to one vessel alone. A table without the request falls back on the
-    realised interval; one without either is returned whole. (The claims use :func:`finest`.)"""
+    """The rows of a figure that shows one sampling interval: the finest (``which='finest'``) or
+    the coarsest of the intervals the sweep asked for (``cfg_noise.sample_dt_LU``, in L/U0).
+    Selected by the requested value, not the realised one (``m_sample_dt_LU``): each vessel and
+    speed decimates the request to its own nearest step, so the realised finest value can belong
+    to one vessel alone. A table without the request falls back on the realised interval; one
+    without either is returned whole. (The claims use :func:`finest`.)"""
     for col in ("cfg_noise.sample_dt_LU", "m_sample_dt_LU"):
         if col in df and df[col].notna().any():
             vals = sorted(df[col].dropna().unique())
@@ -179,7 +183,8 @@ def at_sampling(df: pd.DataFrame, which: str = "finest") -> pd.DataFrame:
 
 
 def _first(df: pd.DataFrame, **eq) -> pd.Series | None:
-    """The run of ``df`` matching ``eq``; of several (datasets), the lowest seed (the figure names it)."""
+    """The run of ``df`` matching ``eq``; of several (datasets), the lowest seed (the figure
+    names it)."""
     sel = df
     for k, v in eq.items():
         sel = sel[sel[k] == v]
@@ -190,9 +195,9 @@ def _first(df: pd.DataFrame, **eq) -> pd.Series | None:
 
 
 def drift_heatmaps(b: Builder, runs, params, study: str, model: str, noise: str, name: str):
-    """Median |relative error| per estimator x parameter, one panel per structure. Each cell's number is written
-    where it fits at 8 pt, else the title points to the table with the numbers; grey cells have no relative error
-    (a zero truth) or no run."""
+    """Median |relative error| per estimator x parameter, one panel per structure. Each cell's
+    number is written where it fits at 8 pt, else the title points to the table with the numbers;
+    grey cells have no relative error (a zero truth) or no run."""
     p = params[(params["cfg_model.name"] == model) & (params["cfg_noise.name"] == noise)
                & params["truth_kind"].isin(["exact", "approximate", "derived"])]
     if not len(p):
@@ -258,7 +263,8 @@ def drift_heatmaps(b: Builder, runs, params, study: str, model: str, noise: str,
 
 
 def fit_time_figure(b: Builder, runs, study: str):
-    """Median fit time per estimator (groups) and structure (bars, coloured and hatched by structure)."""
+    """Median fit time per estimator (groups) and structure (bars, coloured and hatched by
+    structure)."""
     r = runs[runs["t_fit"].notna()]
     if not len(r):
         return
@@ -349,11 +355,12 @@ def correlation_figure(b: Builder, runs, study: str, run: pd.Series, label: str)
 
 
 def validation_figure(b: Builder, study: str, entries: list, maneuver: str, name: str, what: str, setup: str = ""):
-    """Truth against the predictions of several runs on one validation manoeuvre (from the saved traces).
-    ``entries``: (label, run_id, style) with style a dict of ``color``, ``marker``, ``ls`` (from
-    :func:`estimator_style` or :func:`structure_style`: the colour follows what the traces differ in); ``setup``
-    names what they share (model, noise, sampling interval), for the title. A channel no model predicts (a
-    Nomoto model's u and v stay at their initial values) is left out, and the title says so."""
+    """Truth against the predictions of several runs on one validation manoeuvre (from the saved
+    traces). ``entries``: (label, run_id, style) with style a dict of ``color``, ``marker``,
+    ``ls`` (from :func:`estimator_style` or :func:`structure_style`: the colour follows what the
+    traces differ in); ``setup`` names what they share (model, noise, sampling interval), for the
+    title. A channel no model predicts (a Nomoto model's u and v stay at their initial values) is
+    left out, and the title says so."""
     entries = [e if len(e) == 3 else (e[0], e[1], {"color": TOL_MUTED[k % len(TOL_MUTED)]})
                for k, e in enumerate(entries)]
     traces = [(lab, b.artefact_csv(rid, f"validation/{maneuver}.csv"), st) for lab, rid, st in entries]
@@ -429,7 +436,8 @@ def rmse_cc_table(b: Builder, runs, study: str, group, maneuvers, channels=("u",
 
 
 def lcurve_figure(b: Builder, study: str, entries: list, eq: str = "N"):
-    """L-curves of truncated LS-SVM runs (artefact <eq>/lcurve.csv) with the rank each chose (ringed)."""
+    """L-curves of truncated LS-SVM runs (artefact <eq>/lcurve.csv) with the rank each chose
+    (ringed)."""
     curves = [(lab, b.artefact_csv(run["run_id"], f"{eq}/lcurve.csv"), run.get(f"m_est_{eq}_rank"))
               for lab, run in entries]
     curves = [c for c in curves if c[1] is not None]
@@ -476,11 +484,11 @@ CONV_LINEAR = 2.0
 
 
 def convergence_figure(b: Builder, study: str, run, params, name: str, label: str, title: str | None = None):
-    """Every coefficient of an incremental LS-SVM run against the number of samples, over its truth, on a
-    symmetric-log axis (linear within +-2, logarithmic beyond: every coefficient shown, however far off). The
-    coefficients that end beyond twice their truth (on the logarithmic part) are named in the title and in the
-    caption with their final ratio. ``label`` describes the output (README), ``title`` (default: the run's
-    set-up) heads the figure."""
+    """Every coefficient of an incremental LS-SVM run against the number of samples, over its
+    truth, on a symmetric-log axis (linear within +-2, logarithmic beyond: every coefficient
+    shown, however far off). The coefficients that end beyond twice their truth (on the
+    logarithmic part) are named in the title and in the caption with their final ratio. ``label``
+    describes the output (README), ``title`` (default: the run's set-up) heads the figure."""
     from .style import signed_axis
 
     plt = _plt()
@@ -530,7 +538,8 @@ def convergence_figure(b: Builder, study: str, run, params, name: str, label: st
 
 
 def _run_setup(run) -> str:
-    """What one run was: model, structure, noise, sampling interval and dataset seed, for a figure's title."""
+    """What one run was: model, structure, noise, sampling interval and dataset seed, for a
+    figure's title."""
     parts = [f"{run.get('cfg_model.name')}", f"{run.get('cfg_structure.name')}", f"noise {run.get('cfg_noise.name')}"]
     sub = sampling_label(pd.DataFrame([run]))
     if sub:

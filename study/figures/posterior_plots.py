@@ -1,5 +1,5 @@
-"""The posterior figures of an emcee run: its corner plot and its posterior-predictive band on a validation
-manoeuvre, with a note on how much of the truth the band holds."""
+"""The posterior figures of an emcee run: its corner plot and its posterior-predictive band on a
+validation manoeuvre, with a note on how much of the truth the band holds."""
 from __future__ import annotations
 
 import io
@@ -14,8 +14,9 @@ __all__ = ["emcee_figures", "band_coverage_note"]
 
 
 def emcee_figures(b: Builder, study: str, run, params, maneuver: str = "zigzag_35_35"):
-    """Corner plot of an emcee run's chain (model parameters only) and its posterior-predictive band, with the
-    band's width drawn again around the posterior median (on the scale of a manoeuvre a narrow band is invisible)."""
+    """Corner plot of an emcee run's chain (model parameters only) and its posterior-predictive
+    band, with the band's width drawn again around the posterior median (on the scale of a
+    manoeuvre a narrow band is invisible)."""
     plt = _plt()
     setup = _run_setup(run)
     raw = b.artefact(run["run_id"], "chain.npz")
@@ -79,9 +80,10 @@ def emcee_figures(b: Builder, study: str, run, params, maneuver: str = "zigzag_3
 
 
 def band_coverage_note(run, params, inside: dict) -> str:
-    """What a posterior-predictive figure's dataset shows, from its numbers: whether the run's 90 % parameter
-    intervals hold the truth (how many of how many, which miss) and the share of the plotted record at which the
-    truth lies inside the 90 % band, per channel (``inside``: channel -> share)."""
+    """What a posterior-predictive figure's dataset shows, from its numbers: whether the run's 90
+    % parameter intervals hold the truth (how many of how many, which miss) and the share of the
+    plotted record at which the truth lies inside the 90 % band, per channel (``inside``: channel
+    -> share)."""
     pr = params[params["run_id"] == run["run_id"]]
     pr = pr[pr["ci_low"].notna() & pr["ci_high"].notna() & pr["truth"].notna()] if "ci_low" in pr else pr.iloc[:0]
     hit = (pr["ci_low"] <= pr["truth"]) & (pr["truth"] <= pr["ci_high"])

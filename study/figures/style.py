@@ -1,12 +1,14 @@
-"""How every figure of ``python -m study figures`` looks: one colour and marker per estimator and per sample
-structure (keyed by name, so a figure that shows a subset keeps each one's colour), fonts sized for print, log axes
-with enough labelled ticks, heatmap cell numbers only where they fit, the units of the identified parameters, and
-:func:`readability_problems`, the rules a figure is checked against (tests/figures/test_figure_style.py).
+"""How every figure of ``python -m study figures`` looks: one colour and marker per estimator and
+per sample structure (keyed by name, so a figure that shows a subset keeps each one's colour), fonts
+sized for print, log axes with enough labelled ticks, heatmap cell numbers only where they fit, the
+units of the identified parameters, and :func:`readability_problems`, the rules a figure is checked
+against (tests/figures/test_figure_style.py).
 
-Print size: the figures are drawn at most :data:`PRINT_WIDTH_IN` wide, Elsevier's double-column width (190 mm;
-Elsevier, "Artwork sizing", https://www.elsevier.com/about/policies-and-standards/author/artwork-and-media-instructions/artwork-sizing),
-so a font of :data:`MIN_FONT_PT` or more on the figure is that size or more in print (a wider figure is scaled
-down, and the check scales its fonts with it).
+Print size: the figures are drawn at most :data:`PRINT_WIDTH_IN` wide, Elsevier's double-column
+width (190 mm; Elsevier, "Artwork sizing",
+https://www.elsevier.com/about/policies-and-standards/author/artwork-and-media-instructions/artwork-sizing),
+so a font of :data:`MIN_FONT_PT` or more on the figure is that size or more in print (a wider figure
+is scaled down, and the check scales its fonts with it).
 """
 from __future__ import annotations
 
@@ -82,14 +84,16 @@ def estimator_style(name: str) -> dict:
 
 
 def structure_style(name: str) -> dict:
-    """``color``, ``marker``, ``hatch`` and ``ls`` of a sample structure, the same in every figure."""
+    """``color``, ``marker``, ``hatch`` and ``ls`` of a sample structure, the same in every
+    figure."""
     c, m, h, ls = STRUCTURE_STYLE.get(name, ("#777777", _fallback(name), "", "-"))
     return {"color": c, "marker": m, "hatch": h, "ls": ls}
 
 
 def rc() -> dict:
-    """matplotlib settings of every figure: fonts of 8-10 pt (the figures are at most PRINT_WIDTH_IN wide), Tol's
-    muted colours for anything not keyed by name, no dates or hash randomness in the files."""
+    """matplotlib settings of every figure: fonts of 8-10 pt (the figures are at most
+    PRINT_WIDTH_IN wide), Tol's muted colours for anything not keyed by name, no dates or hash
+    randomness in the files."""
     from cycler import cycler
 
     return {"svg.hashsalt": "study", "figure.dpi": 100, "font.size": 9, "axes.titlesize": 9, "axes.labelsize": 9,
@@ -99,10 +103,10 @@ def rc() -> dict:
 
 
 def log_ticks(ax, axis: str = "y") -> None:
-    """At least three labelled ticks on a log axis, whatever it spans: decades (10^-3) when the view spans three
-    or more, 1-2-5 in each decade (0.002, 0.005) when it spans one to three, evenly spaced values below one decade
-    (where a log axis is nearly linear). Call it when the limits are final (after the last plot on the axes);
-    shared axes share the locator."""
+    """At least three labelled ticks on a log axis, whatever it spans: decades (10^-3) when the
+    view spans three or more, 1-2-5 in each decade (0.002, 0.005) when it spans one to three,
+    evenly spaced values below one decade (where a log axis is nearly linear). Call it when the
+    limits are final (after the last plot on the axes); shared axes share the locator."""
     from matplotlib.ticker import (
         FuncFormatter, LogFormatterSciNotation, LogLocator, MaxNLocator, NullFormatter,
     )
@@ -129,11 +133,12 @@ def log_ticks(ax, axis: str = "y") -> None:
 
 def signed_axis(ax, values, axis: str = "y", linthresh: float = 1.0, linear_below: float = 5.0,
                 linscale: float = 1.0, inner: tuple = (), allow_log: bool = True) -> str:
-    """An axis chosen from the values it shows, with labelled ticks a reader can read: log (with :func:`log_ticks`)
-    when every value is positive (and ``allow_log``); linear when none exceeds ``linear_below`` in magnitude;
-    else symmetric-log, linear within +-``linthresh`` (stretched to ``linscale`` decades each side), with ticks at
-    0, +-``inner``, +-``linthresh`` and every power of ten beyond, written plainly (-100, -10, -1, 0, 1, 10, 100),
-    never matplotlib's default symlog labels. Call it after the last plot on the axes. Returns the scale chosen."""
+    """An axis chosen from the values it shows, with labelled ticks a reader can read: log (with
+    :func:`log_ticks`) when every value is positive (and ``allow_log``); linear when none exceeds
+    ``linear_below`` in magnitude; else symmetric-log, linear within +-``linthresh`` (stretched
+    to ``linscale`` decades each side), with ticks at 0, +-``inner``, +-``linthresh`` and every
+    power of ten beyond, written plainly (-100, -10, -1, 0, 1, 10, 100), never matplotlib's
+    default symlog labels. Call it after the last plot on the axes. Returns the scale chosen."""
     from matplotlib.ticker import FixedLocator, FuncFormatter, MaxNLocator, NullLocator
 
     v = np.asarray(values, dtype=float)
@@ -164,8 +169,8 @@ def signed_axis(ax, values, axis: str = "y", linthresh: float = 1.0, linear_belo
 
 
 def short_number(v: float, digits: int = 2) -> str:
-    """A cell number in at most six characters with two digits (0.031, 16, 3.8e-6, 1.5e2), four with one (0.03,
-    2e1, 4e-6): no '+' and no leading zero in exponents."""
+    """A cell number in at most six characters with two digits (0.031, 16, 3.8e-6, 1.5e2), four
+    with one (0.03, 2e1, 4e-6): no '+' and no leading zero in exponents."""
     if not np.isfinite(v):
         return ""
     if v == 0:
@@ -177,9 +182,9 @@ def short_number(v: float, digits: int = 2) -> str:
 
 
 def annotate_cells(fig, ax, values: np.ndarray, fmt=short_number, fontsize: float = 8.0, dark=None) -> bool:
-    """Write each finite cell's value on an imshow heatmap, at ``fontsize``, if every label fits its cell at the
-    figure's layout (else nothing is written and False is returned: the caller says where the numbers are).
-    ``dark(v)``: cells whose colour is dark get white text."""
+    """Write each finite cell's value on an imshow heatmap, at ``fontsize``, if every label fits
+    its cell at the figure's layout (else nothing is written and False is returned: the caller
+    says where the numbers are). ``dark(v)``: cells whose colour is dark get white text."""
     fig.canvas.draw()  # the layout decides the cell size
     bb = ax.get_window_extent()
     nrow, ncol = values.shape
@@ -209,8 +214,9 @@ def param_label(name: str) -> str:
 
 
 def sampling_label(df) -> str:
-    """The sampling interval of the rows a figure shows, in seconds and in the ship's time scale L/U0: 'sampled at
-    0.1 s (0.0082 L/U0)'; a range where vessels or speeds differ; '' for a table without the columns."""
+    """The sampling interval of the rows a figure shows, in seconds and in the ship's time scale
+    L/U0: 'sampled at 0.1 s (0.0082 L/U0)'; a range where vessels or speeds differ; '' for a
+    table without the columns."""
     if "m_sample_dt" not in df or not df["m_sample_dt"].notna().any():
         return ""
     s = df["m_sample_dt"].dropna()
@@ -233,7 +239,8 @@ _MATH = re.compile(r"\\mathdefault|\\times|[${}^\s]")
 
 
 def _categorical(labels) -> bool:
-    """Tick labels that are names (estimators, h/T classes), not numbers ('0.5', '$\\mathdefault{10^{-2}}$')."""
+    """Tick labels that are names (estimators, h/T classes), not numbers ('0.5',
+    '$\\mathdefault{10^{-2}}$')."""
     return any(not re.fullmatch(r"[-+0-9.,eE]*", _MATH.sub("", t.get_text()).replace("\u2212", "-")) for t in labels)
 
 
@@ -251,10 +258,11 @@ def _labelled_ticks(axis) -> list:
 
 
 def readability_problems(fig, width_in: float = PRINT_WIDTH_IN, min_pt: float = MIN_FONT_PT) -> list[str]:
-    """What keeps a figure from print: any text below ``min_pt`` at the printed size (the figure scaled to at most
-    ``width_in``), an axis with tick labels but no label, a numeric axis whose label has no unit in brackets
-    ('[m/s]', '[-]' when non-dimensional; categorical axes need a label only), a log axis with fewer than three
-    labelled ticks. The figure is drawn first (tick labels exist only then)."""
+    """What keeps a figure from print: any text below ``min_pt`` at the printed size (the figure
+    scaled to at most ``width_in``), an axis with tick labels but no label, a numeric axis whose
+    label has no unit in brackets ('[m/s]', '[-]' when non-dimensional; categorical axes need a
+    label only), a log axis with fewer than three labelled ticks. The figure is drawn first (tick
+    labels exist only then)."""
     fig.canvas.draw()
     scale = min(1.0, width_in / fig.get_size_inches()[0])
     problems = []

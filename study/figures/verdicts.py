@@ -1,29 +1,33 @@
-"""Verdicts with their evidence: paired comparisons, a stated test, ties counted as ties, and a sensitivity table.
+"""Verdicts with their evidence: paired comparisons, a stated test, ties counted as ties, and a
+sensitivity table.
 
-A claim of the form "A gives lower errors than B" is decided on **pairs**: the same data (vessel, model,
-set-up, seed) identified both ways, compared coefficient by coefficient (or equation by equation, as an
-alternative). A pair is a **tie** when the two errors differ by less than ``tie`` (relative, 5 % by default) or
-both lie below ``floor`` (an error nobody would act on); ties are reported, not dropped into either side. The
-verdict is the **sign test** (exact binomial test of wins against losses, one-sided, level 0.05; scipy) in the
-claim's direction; the Wilcoxon signed-rank test of the log error ratios is given beside it:
+A claim of the form "A gives lower errors than B" is decided on **pairs**: the same data (vessel,
+model, set-up, seed) identified both ways, compared coefficient by coefficient (or equation by
+equation, as an alternative). A pair is a **tie** when the two errors differ by less than ``tie``
+(relative, 5 % by default) or both lie below ``floor`` (an error nobody would act on); ties are
+reported, not dropped into either side. The verdict is the **sign test** (exact binomial test of
+wins against losses, one-sided, level 0.05; scipy) in the claim's direction; the Wilcoxon
+signed-rank test of the log error ratios is given beside it:
 
 - **holds**: wins outnumber losses beyond chance (p < 0.05);
 - **does not hold**: losses outnumber wins beyond chance (p < 0.05 the other way);
 - **cannot tell**: neither (too few pairs, or as many losses as wins).
 
-Within a pair, scaling both errors by the term's weight changes nothing (the same factor): the scaled error
-matters where errors are aggregated (medians per equation, or across coefficients). A verdict is then recomputed
-under each reasonable alternative choice (metric, pairing unit, noise level,
-sampling interval, subset of models...): :func:`settle` says "depends on ..." when the alternatives disagree with
-the primary choice, naming them. Verdicts are computed **per model** (never across models of different order or
-size, whose coefficient counts would weight the answer) and summarised as "holds for k of m models".
+Within a pair, scaling both errors by the term's weight changes nothing (the same factor): the
+scaled error matters where errors are aggregated (medians per equation, or across coefficients). A
+verdict is then recomputed under each reasonable alternative choice (metric, pairing unit, noise
+level, sampling interval, subset of models...): :func:`settle` says "depends on ..." when the
+alternatives disagree with the primary choice, naming them. Verdicts are computed **per model**
+(never across models of different order or size, whose coefficient counts would weight the answer)
+and summarised as "holds for k of m models".
 
-**The dataset as the unit.** The coefficients of one fit share one noise realisation, so they are not independent
-evidence: :func:`dataset_errors` reduces each run to one error (the median over its coefficients), a failed run to
-an infinite one (a loss), and :func:`paired_datasets` decides the claim over independent datasets (replicates),
-with the effect size (median error ratio) and its bootstrap interval over datasets, and, for "cannot tell", the
-smallest effect those datasets could have detected (:data:`POWER`), so that "no difference" and "too few data"
-read differently. :func:`label_invariant` scores exchangeable coefficients (two time constants) without their
+**The dataset as the unit.** The coefficients of one fit share one noise realisation, so they are
+not independent evidence: :func:`dataset_errors` reduces each run to one error (the median over its
+coefficients), a failed run to an infinite one (a loss), and :func:`paired_datasets` decides the
+claim over independent datasets (replicates), with the effect size (median error ratio) and its
+bootstrap interval over datasets, and, for "cannot tell", the smallest effect those datasets could
+have detected (:data:`POWER`), so that "no difference" and "too few data" read differently.
+:func:`label_invariant` scores exchangeable coefficients (two time constants) without their
 labels.
 """
 from __future__ import annotations
@@ -44,9 +48,9 @@ __all__ = ["paired", "compare", "sensitivity", "describe", "explain", "settle", 
 def paired(a, b, tie: float = TIE, floor: float = 0.0) -> dict:
     """Claim "a is lower than b" on paired errors ``a`` and ``b`` (NaN pairs dropped).
 
-    Returns ``{'pairs', 'wins', 'losses', 'ties', 'p', 'p_reverse', 'p_wilcoxon', 'median_ratio', 'verdict'}``:
-    ``p`` the one-sided sign-test p-value of the claim, ``p_reverse`` of its opposite, ``median_ratio`` the median
-    of a / b over pairs where b > 0."""
+    Returns ``{'pairs', 'wins', 'losses', 'ties', 'p', 'p_reverse', 'p_wilcoxon', 'median_ratio',
+    'verdict'}``: ``p`` the one-sided sign-test p-value of the claim, ``p_reverse`` of its
+    opposite, ``median_ratio`` the median of a / b over pairs where b > 0."""
     a, b = np.asarray(a, float), np.asarray(b, float)
     ok = np.isfinite(a) & np.isfinite(b)
     a, b = np.abs(a[ok]), np.abs(b[ok])
@@ -75,7 +79,8 @@ def paired(a, b, tie: float = TIE, floor: float = 0.0) -> dict:
 
 
 def describe(r: dict) -> str:
-    """One line of a paired comparison: 'holds (wins 14, losses 3, ties 1 of 18; sign test p = 0.006)'."""
+    """One line of a paired comparison: 'holds (wins 14, losses 3, ties 1 of 18; sign test p =
+    0.006)'."""
     if not r["pairs"]:
         return "cannot tell (no pairs)"
     p = r["p"] if r["verdict"] != "does not hold" else r["p_reverse"]
@@ -85,9 +90,9 @@ def describe(r: dict) -> str:
 
 
 def settle(table: pd.DataFrame, primary: str = "primary") -> str:
-    """The claim's verdict from its sensitivity table (``choice`` and ``verdict`` columns, the primary choice's
-    row named ``primary``): the primary verdict if every alternative agrees, else 'depends on ...' naming the
-    alternatives that disagree and what they give."""
+    """The claim's verdict from its sensitivity table (``choice`` and ``verdict`` columns, the
+    primary choice's row named ``primary``): the primary verdict if every alternative agrees,
+    else 'depends on ...' naming the alternatives that disagree and what they give."""
     if not len(table):
         return "not run"
     base = table.loc[table["choice"] == primary, "verdict"]
@@ -108,8 +113,8 @@ def explain(table: pd.DataFrame) -> str:
 
 
 def summary(per_model: dict, noun: str = "models") -> str:
-    """'holds for 3 of 4 models (kcs: cannot tell)' from model -> verdict; 'holds for both models', 'holds for
-    all 3 models' when they agree."""
+    """'holds for 3 of 4 models (kcs: cannot tell)' from model -> verdict; 'holds for both
+    models', 'holds for all 3 models' when they agree."""
     if not per_model:
         return "not run"
     n = len(per_model)
@@ -128,9 +133,10 @@ def summary(per_model: dict, noun: str = "models") -> str:
 
 def compare(p: pd.DataFrame, by: str, a, b, keys: list, metric: str, unit: str = "coefficient",
             tie: float = TIE, floor: float = 0.0) -> dict:
-    """:func:`paired` of the rows with ``by == a`` against those with ``by == b``, matched on ``keys`` (which must
-    name the data: model, set-up, seed, ...). ``unit='coefficient'``: one pair per coefficient (``equation``,
-    ``name``); ``'equation'``: one pair per equation, the median of its coefficients' ``metric``."""
+    """:func:`paired` of the rows with ``by == a`` against those with ``by == b``, matched on
+    ``keys`` (which must name the data: model, set-up, seed, ...). ``unit='coefficient'``: one
+    pair per coefficient (``equation``, ``name``); ``'equation'``: one pair per equation, the
+    median of its coefficients' ``metric``."""
     q = p[p[by].isin([a, b])]
     if unit == "equation":
         q = q.groupby(list(keys) + ["equation", by], dropna=False)[metric].median().reset_index()
@@ -147,8 +153,8 @@ def compare(p: pd.DataFrame, by: str, a, b, keys: list, metric: str, unit: str =
 
 def sensitivity(p: pd.DataFrame, by: str, a, b, keys: list, choices: list, tie: float = TIE,
                 floor: float = 0.0) -> pd.DataFrame:
-    """The claim "``a`` beats ``b``" under each choice ``(label, rows, metric, unit)``; the first is the primary
-    (labelled 'primary: <label>'). One row per choice with the paired statistics."""
+    """The claim "``a`` beats ``b``" under each choice ``(label, rows, metric, unit)``; the first
+    is the primary (labelled 'primary: <label>'). One row per choice with the paired statistics."""
     rows = []
     for i, (label, rows_of, metric, unit) in enumerate(choices):
         r = compare(rows_of if rows_of is not None else p, by, a, b, keys, metric, unit, tie=tie, floor=floor)
@@ -165,12 +171,13 @@ N_BOOT = 2000
 
 def dataset_errors(p: pd.DataFrame, by: str, keys: list, metric: str = "abs_rel_error",
                    runs: pd.DataFrame | None = None, summary: str = "median") -> pd.DataFrame:
-    """One error per dataset and method: rows are the datasets (``keys``: everything that names the data, the
-    replicate or seed among them), columns the values of ``by``, each cell the ``summary`` (median or mean) of
-    ``metric`` over the run's coefficients. The coefficients of one fit are never counted as separate evidence.
+    """One error per dataset and method: rows are the datasets (``keys``: everything that names the
+    data, the replicate or seed among them), columns the values of ``by``, each cell the ``summary``
+    (median or mean) of ``metric`` over the run's coefficients. The coefficients of one fit are
+    never counted as separate evidence.
 
-    ``runs`` (every status): a run of a dataset that failed, or that gave no finite error, is an infinite error,
-    so it loses its pair instead of dropping out of it."""
+    ``runs`` (every status): a run of a dataset that failed, or that gave no finite error, is an
+    infinite error, so it loses its pair instead of dropping out of it."""
     cols = list(keys) + [by]
     q = p[cols + [metric]].copy()
     q[metric] = q[metric].astype(float).abs()
@@ -186,7 +193,8 @@ def dataset_errors(p: pd.DataFrame, by: str, keys: list, metric: str = "abs_rel_
 
 
 def _critical_wins(n: int, alpha: float = ALPHA) -> int | None:
-    """The fewest wins of ``n`` decided pairs a one-sided sign test calls significant (None: no number can)."""
+    """The fewest wins of ``n`` decided pairs a one-sided sign test calls significant (None: no
+    number can)."""
     for k in range(n + 1):
         if stats.binomtest(k, n, 0.5, alternative="greater").pvalue < alpha:
             return k
@@ -194,8 +202,8 @@ def _critical_wins(n: int, alpha: float = ALPHA) -> int | None:
 
 
 def detectable_win_rate(n: int, power: float = POWER, alpha: float = ALPHA) -> float:
-    """The smallest probability of a win that ``n`` decided pairs detect with the sign test with probability
-    ``power`` (inf when no win rate can be detected: too few pairs)."""
+    """The smallest probability of a win that ``n`` decided pairs detect with the sign test with
+    probability ``power`` (inf when no win rate can be detected: too few pairs)."""
     k = _critical_wins(n, alpha) if n >= 1 else None
     if k is None:
         return math.inf
@@ -210,15 +218,17 @@ def detectable_win_rate(n: int, power: float = POWER, alpha: float = ALPHA) -> f
 
 
 def paired_datasets(a, b, tie: float = TIE, floor: float = 0.0, n_boot: int = N_BOOT, seed: int = 0) -> dict:
-    """Claim "a's error is lower than b's" over **datasets**: ``a[i]``, ``b[i]`` are the two methods' errors on
-    dataset ``i`` (inf: the method failed there; NaN: the dataset lacks one of them and is dropped).
+    """Claim "a's error is lower than b's" over **datasets**: ``a[i]``, ``b[i]`` are the two
+    methods' errors on dataset ``i`` (inf: the method failed there; NaN: the dataset lacks one of
+    them and is dropped).
 
-    Returns the sign test of :func:`paired` (wins, losses, ties of datasets; ``p``, ``p_reverse``, ``verdict``)
-    and the effect size: ``ratio``, the median over datasets of a / b (below 1: a is better), with its
-    ``ratio_low``, ``ratio_high`` 95 % percentile bootstrap interval over datasets, and ``detectable_ratio``: the
-    ratio a true effect must reach (either way) for these datasets to detect it with probability :data:`POWER`,
-    with the spread of the observed log ratios (inf when no effect could be detected: too few datasets). A
-    "cannot tell" with a detectable ratio near 1 means no difference; far from 1, too few data.
+    Returns the sign test of :func:`paired` (wins, losses, ties of datasets; ``p``, ``p_reverse``,
+    ``verdict``) and the effect size: ``ratio``, the median over datasets of a / b (below 1: a is
+    better), with its ``ratio_low``, ``ratio_high`` 95 % percentile bootstrap interval over
+    datasets, and ``detectable_ratio``: the ratio a true effect must reach (either way) for these
+    datasets to detect it with probability :data:`POWER`, with the spread of the observed log ratios
+    (inf when no effect could be detected: too few datasets). A "cannot tell" with a detectable
+    ratio near 1 means no difference; far from 1, too few data.
     """
     a, b = np.asarray(a, float), np.asarray(b, float)
     ok = ~(np.isnan(a) | np.isnan(b))
@@ -244,8 +254,8 @@ def paired_datasets(a, b, tie: float = TIE, floor: float = 0.0, n_boot: int = N_
 
 
 def describe_datasets(r: dict, unit: str = "datasets") -> str:
-    """One line of :func:`paired_datasets`: verdict, counts of datasets, sign test, effect with its interval, and,
-    for "cannot tell", the smallest effect the datasets could have detected."""
+    """One line of :func:`paired_datasets`: verdict, counts of datasets, sign test, effect with
+    its interval, and, for "cannot tell", the smallest effect the datasets could have detected."""
     if not r["pairs"]:
         return f"cannot tell (no {unit})"
     p = r["p"] if r["verdict"] != "does not hold" else r["p_reverse"]
@@ -263,10 +273,11 @@ def describe_datasets(r: dict, unit: str = "datasets") -> str:
 
 
 def label_invariant(p: pd.DataFrame, groups: list, by: str = "run_id") -> pd.DataFrame:
-    """``p`` with exchangeable coefficients scored without their labels: within each run (``by``) and each group
-    of names (e.g. ``("T1", "T2")``: two time constants of one model, which no data orders), the estimates are
-    matched to the truths in the order that gives the smallest total relative error, and ``estimate``,
-    ``rel_error``, ``abs_rel_error`` follow. Returns a copy."""
+    """``p`` with exchangeable coefficients scored without their labels: within each run (``by``)
+    and each group of names (e.g. ``("T1", "T2")``: two time constants of one model, which no
+    data orders), the estimates are matched to the truths in the order that gives the smallest
+    total relative error, and ``estimate``, ``rel_error``, ``abs_rel_error`` follow. Returns a
+    copy."""
     from itertools import permutations
 
     out = p.copy()
@@ -310,10 +321,11 @@ def _fill_replicate(d: pd.DataFrame | None) -> pd.DataFrame | None:
 def compare_datasets(p: pd.DataFrame, by: str, a, b, keys: list, metric: str = "abs_rel_error",
                      runs: pd.DataFrame | None = None, summary: str = "median", tie: float = TIE,
                      floor: float = 0.0) -> dict:
-    """:func:`paired_datasets` of method ``a`` against ``b`` (values of column ``by``) over the datasets named by
-    ``keys`` and the replicate: one error per dataset and method (``summary`` of ``metric`` over the run's
-    coefficients), a failed run an infinite error. ``summary='coefficient'``: each coefficient its own pair (the
-    coefficients of one fit are not independent; shown only as the counting unit a reader might expect)."""
+    """:func:`paired_datasets` of method ``a`` against ``b`` (values of column ``by``) over the
+    datasets named by ``keys`` and the replicate: one error per dataset and method (``summary``
+    of ``metric`` over the run's coefficients), a failed run an infinite error.
+    ``summary='coefficient'``: each coefficient its own pair (the coefficients of one fit are not
+    independent; shown only as the counting unit a reader might expect)."""
     p, runs = _fill_replicate(p), _fill_replicate(runs)
     k = _dataset_keys(p, keys)
     if summary == "coefficient":
@@ -333,12 +345,13 @@ def compare_datasets(p: pd.DataFrame, by: str, a, b, keys: list, metric: str = "
 def dataset_sensitivity(claim: str, comparison: str, p: pd.DataFrame, runs: pd.DataFrame | None, by: str, a, b,
                         keys: list, subsets: list = (), metric: str = "abs_rel_error", tie: float = TIE,
                         floor: float = 0.0, alt_metric: str | None = "scaled_error") -> pd.DataFrame:
-    """One claim's comparison under its primary choice and every other reasonable one, one row each
-    (:data:`SENSITIVITY_COLUMNS`). The primary: datasets as the unit, the median of ``metric`` over each run's
-    coefficients, ties within ``tie``, both errors below ``floor`` a tie. Always varied: the tie (1 %, 10 %), the
-    floor (none; ten times, or 0.1 % where there is none), the per-dataset summary (mean), the counting unit
-    (coefficients, not independent), the metric (``alt_metric`` where the table has it); then each of
-    ``subsets``: ``(label, params, runs)`` (one noise level, one sampling interval, one model...)."""
+    """One claim's comparison under its primary choice and every other reasonable one, one row
+    each (:data:`SENSITIVITY_COLUMNS`). The primary: datasets as the unit, the median of
+    ``metric`` over each run's coefficients, ties within ``tie``, both errors below ``floor`` a
+    tie. Always varied: the tie (1 %, 10 %), the floor (none; ten times, or 0.1 % where there is
+    none), the per-dataset summary (mean), the counting unit (coefficients, not independent), the
+    metric (``alt_metric`` where the table has it); then each of ``subsets``: ``(label, params,
+    runs)`` (one noise level, one sampling interval, one model...)."""
     rows = []
 
     def add(label, pp, rr, **kw):
@@ -366,9 +379,9 @@ def dataset_sensitivity(claim: str, comparison: str, p: pd.DataFrame, runs: pd.D
 
 
 def dataset_verdict(t: pd.DataFrame) -> tuple[str, str]:
-    """(verdict, numbers) of a :func:`dataset_sensitivity` table: the primary verdict, or 'depends on the choice'
-    naming every choice that flips it (:func:`settle`), and the primary's numbers (:func:`describe_datasets`)
-    with the flips' own verdicts."""
+    """(verdict, numbers) of a :func:`dataset_sensitivity` table: the primary verdict, or
+    'depends on the choice' naming every choice that flips it (:func:`settle`), and the primary's
+    numbers (:func:`describe_datasets`) with the flips' own verdicts."""
     if not len(t):
         return "not run", "no datasets"
     prim = t.iloc[0].to_dict()
@@ -380,7 +393,8 @@ def dataset_verdict(t: pd.DataFrame) -> tuple[str, str]:
 
 
 def tidy_sensitivity(t: pd.DataFrame) -> pd.DataFrame:
-    """The sensitivity table as written: :data:`SENSITIVITY_COLUMNS`, the choice's label in ``choice``."""
+    """The sensitivity table as written: :data:`SENSITIVITY_COLUMNS`, the choice's label in
+    ``choice``."""
     t = t.assign(choice=t["what"]) if "what" in t else t
     return t[[c for c in SENSITIVITY_COLUMNS if c in t.columns]]
 
@@ -394,13 +408,15 @@ NOMINAL = 0.90
 
 def coverage_over_datasets(p: pd.DataFrame, dataset: str = "run_id", nominal: float = NOMINAL,
                            band: tuple = COVERAGE_BAND, n_boot: int = N_BOOT, seed: int = 0) -> dict:
-    """Coverage of the truth by the intervals (``ci_low``, ``ci_high``) of ``p``'s rows, the dataset (``dataset``:
-    one run is one dataset) as the unit: the share of intervals that hold the truth, with its 95 % percentile
-    bootstrap interval over datasets (the coefficients of one fit miss together, so they are resampled together),
-    how the misses fall (datasets that miss none, every one, of their coefficients) and the verdict on "about
-    ``nominal``": **holds** when the coverage is inside ``band``; **does not hold** when its interval lies wholly
-    outside the band; **cannot tell** otherwise. ``vs_nominal`` says whether the interval lies below or above
-    ``nominal`` (intervals measurably too narrow or too wide, though perhaps inside the band)."""
+    """Coverage of the truth by the intervals (``ci_low``, ``ci_high``) of ``p``'s rows, the
+    dataset (``dataset``: one run is one dataset) as the unit: the share of intervals that hold
+    the truth, with its 95 % percentile bootstrap interval over datasets (the coefficients of one
+    fit miss together, so they are resampled together), how the misses fall (datasets that miss
+    none, every one, of their coefficients) and the verdict on "about ``nominal``": **holds**
+    when the coverage is inside ``band``; **does not hold** when its interval lies wholly outside
+    the band; **cannot tell** otherwise. ``vs_nominal`` says whether the interval lies below or
+    above ``nominal`` (intervals measurably too narrow or too wide, though perhaps inside the
+    band)."""
     if not len(p):
         return {"datasets": 0, "intervals": 0, "covered": 0, "coverage": math.nan, "cov_low": math.nan,
                 "cov_high": math.nan, "verdict": "not run"}

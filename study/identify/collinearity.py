@@ -1,11 +1,12 @@
-"""Multicollinearity of a regressor matrix: correlation matrix, condition numbers, variance inflation factors.
+"""Multicollinearity of a regressor matrix: correlation matrix, condition numbers, variance
+inflation factors.
 
 - Correlation matrix: Pearson correlation of the regressor columns (Song et al. (2025), Fig. 6).
-- ``cond_corr``: condition number of the correlation matrix, lambda_max / lambda_min (Song et al. (2025) eq. 28,
-  Table 3: 50.2 sway, 7737 surge, 6352 yaw for its USV).
-- ``cond_scaled``: condition number of the regressor matrix with every column scaled to unit Euclidean norm
-  (Belsley, Kuh & Welsch 1980, Regression Diagnostics, ch. 3: scaling without centring, since the models have
-  no intercept and a column's mean is part of what it explains).
+- ``cond_corr``: condition number of the correlation matrix, lambda_max / lambda_min (Song et al.
+  (2025) eq. 28, Table 3: 50.2 sway, 7737 surge, 6352 yaw for its USV).
+- ``cond_scaled``: condition number of the regressor matrix with every column scaled to unit
+  Euclidean norm (Belsley, Kuh & Welsch 1980, Regression Diagnostics, ch. 3: scaling without
+  centring, since the models have no intercept and a column's mean is part of what it explains).
 - ``vif``: variance inflation factor of each column, the diagonal of the inverse correlation matrix,
   VIF_j = 1 / (1 - R_j^2) (Marquardt 1970); above 10 is the usual warning level.
 """
@@ -17,8 +18,8 @@ import numpy as np
 def collinearity(Phi: np.ndarray) -> dict:
     """``{'corr', 'vif', 'cond_corr', 'cond_scaled', 'corr_max'}`` of an (n, k) regressor matrix.
 
-    Constant columns have no correlation: their row and column of ``corr`` and their VIF are NaN, and they are
-    left out of ``cond_corr``.
+    Constant columns have no correlation: their row and column of ``corr`` and their VIF are NaN,
+    and they are left out of ``cond_corr``.
     """
     Phi = np.asarray(Phi, float)
     n, k = Phi.shape

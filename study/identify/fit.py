@@ -1,13 +1,14 @@
 """Identify a model from records: the regression or the output-error problem, the estimator, and the
 per-parameter and multicollinearity results of one run.
 
-``identify(model, structure, estimator_cfg, records)`` is what a study run (``study.run.pipeline``) and the model
-doctor call; it returns an :class:`Identification` (estimates in the model's physical parameters, parameter
-rows for the results table, scalar metrics, artefact files). It fits the run's problem (:func:`fit_regression`:
-one :class:`~study.identify.estimators.problem.RegressionProblem` per equation; or :func:`fit_output_error`)
-through the estimator's one entry, ``Estimator.fit_problem``, then makes the rows (:func:`parameter_rows`), the
-errors against the truth (:func:`drift_metrics`) and the posterior draws (:func:`posterior_draws`).
-``make_problem`` builds a run's output-error problem (``study.identify.output_error``) around the equation-error
+``identify(model, structure, estimator_cfg, records)`` is what a study run (``study.run.pipeline``)
+and the model doctor call; it returns an :class:`Identification` (estimates in the model's physical
+parameters, parameter rows for the results table, scalar metrics, artefact files). It fits the run's
+problem (:func:`fit_regression`: one :class:`~study.identify.estimators.problem.RegressionProblem`
+per equation; or :func:`fit_output_error`) through the estimator's one entry,
+``Estimator.fit_problem``, then makes the rows (:func:`parameter_rows`), the errors against the
+truth (:func:`drift_metrics`) and the posterior draws (:func:`posterior_draws`). ``make_problem``
+builds a run's output-error problem (``study.identify.output_error``) around the equation-error
 estimate. The rows themselves are built in :mod:`study.identify.rows`.
 """
 from __future__ import annotations
@@ -54,18 +55,18 @@ EFFECTS_ESTIMATOR = {"name": "variable_projection",
 
 
 def problem_type(model, structure) -> str:
-    """The problem a run of ``model`` with ``structure`` poses: ``"effects"`` (a model with ``model.effects``),
-    ``"output_error"`` (a structure that simulates) or ``"regression"``."""
+    """The problem a run of ``model`` with ``structure`` poses: ``"effects"`` (a model with
+    ``model.effects``), ``"output_error"`` (a structure that simulates) or ``"regression"``."""
     if getattr(model, "effects", ()):
         return "effects"
     return "output_error" if structure.simulates else "regression"
 
 
 def estimator_for(model, estimator_cfg: dict) -> dict:
-    """The estimator config a run of ``model`` is identified with: ``estimator_cfg``, except for a model with
-    effects, which only variable projection identifies (:data:`EFFECTS_ESTIMATOR`, unless ``estimator_cfg`` is
-    already an estimator of that problem type). The run's configuration, and so its run id, keeps the estimator
-    it names."""
+    """The estimator config a run of ``model`` is identified with: ``estimator_cfg``, except for
+    a model with effects, which only variable projection identifies (:data:`EFFECTS_ESTIMATOR`,
+    unless ``estimator_cfg`` is already an estimator of that problem type). The run's
+    configuration, and so its run id, keeps the estimator it names."""
     if not getattr(model, "effects", ()):
         return estimator_cfg
     if "effects" in make_estimator(estimator_cfg).problem_types:
@@ -79,10 +80,10 @@ def _csv_bytes(df: pd.DataFrame) -> bytes:
 
 @dataclass
 class _Fit:
-    """What the fit of a run's problem hands on to its parameter rows: ``coef_rows`` (equation, name, estimate,
-    extras) in the order reported, scalar metrics, artefact files, timings, posterior draws per name, the
-    truncation bias in posterior sd per reported parameter, and the central-difference rows when the fit built
-    them (:func:`term_scales` reuses them)."""
+    """What the fit of a run's problem hands on to its parameter rows: ``coef_rows`` (equation,
+    name, estimate, extras) in the order reported, scalar metrics, artefact files, timings,
+    posterior draws per name, the truncation bias in posterior sd per reported parameter, and the
+    central-difference rows when the fit built them (:func:`term_scales` reuses them)."""
 
     coef_rows: list = field(default_factory=list)
     metrics: dict = field(default_factory=dict)
@@ -98,10 +99,11 @@ class _Fit:
 
 def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, progress: bool = False,
              truth_vessel=None) -> Identification:
-    """Identify ``model`` from ``records`` with the structure and the estimator config (see module doc).
+    """Identify ``model`` from ``records`` with the structure and the estimator config (see module
+    doc).
 
-    ``truth_vessel``: the vessel a simulated run's records come from; its environment is the truth of a model's
-    effects (None: no truth for them)."""
+    ``truth_vessel``: the vessel a simulated run's records come from; its environment is the
+    truth of a model's effects (None: no truth for them)."""
     truth, truth_how, exact = model.truth()
     kind = problem_type(model, structure)
     est_cfg = estimator_for(model, estimator_cfg)
@@ -126,12 +128,12 @@ def identify(model, structure, estimator_cfg: dict, records, seed: int = 0, prog
 
 def fit_effects(model, structure, estimator_cfg: dict, records, seed: int = 0, progress: bool = False,
                 truth_vessel=None) -> _Fit:
-    """The estimator's fit of a model with effects (problem type ``"effects"``: variable projection,
-    ``study.identify.with_effects``): the free coefficients and the effects' parameters, the estimator's
-    diagnostics (``training_error``, ``effect_evaluations``), the identified model's vessel and replay. The
-    effects' parameters are rows of truth kind ``hidden effect``, their truth that of ``truth_vessel``'s
-    environment (None without it); a coefficient an effect frees has the truth vessel's value (the model's
-    vessel's without it)."""
+    """The estimator's fit of a model with effects (problem type ``"effects"``: variable
+    projection, ``study.identify.with_effects``): the free coefficients and the effects'
+    parameters, the estimator's diagnostics (``training_error``, ``effect_evaluations``), the
+    identified model's vessel and replay. The effects' parameters are rows of truth kind ``hidden
+    effect``, their truth that of ``truth_vessel``'s environment (None without it); a coefficient
+    an effect frees has the truth vessel's value (the model's vessel's without it)."""
     from .with_effects.estimator import ModelWithEffects, hidden_truth
     from .with_effects.problem import EffectsProblem
 
@@ -162,8 +164,9 @@ def fit_effects(model, structure, estimator_cfg: dict, records, seed: int = 0, p
 
 
 def fit_output_error(model, structure, estimator_cfg: dict, records, seed: int = 0, progress: bool = False) -> _Fit:
-    """The estimator's fit of the run's output-error problem (:func:`make_problem`): the model's parameters, the
-    problem's summary (``oe_*``) and the estimator's diagnostics (``est_*``) and artefacts."""
+    """The estimator's fit of the run's output-error problem (:func:`make_problem`): the model's
+    parameters, the problem's summary (``oe_*``) and the estimator's diagnostics (``est_*``) and
+    artefacts."""
     fit = _Fit()
     t0 = time.perf_counter()
     problem = make_problem(model, structure, records, seed=seed)
@@ -188,9 +191,10 @@ def fit_output_error(model, structure, estimator_cfg: dict, records, seed: int =
 
 
 def fit_regression(model, structure, estimator_cfg: dict, records, seed: int = 0, progress: bool = False) -> _Fit:
-    """The estimator's fit of each equation's regression (:func:`prepare`), one estimator per equation, with the
-    run's prior (``estimator.params.prior``) and, for an estimator that models the rows' noise, the structure's
-    noise operators and the rows' errors; then its verdict on the intervals (:meth:`Estimator.trust_verdict`)."""
+    """The estimator's fit of each equation's regression (:func:`prepare`), one estimator per
+    equation, with the run's prior (``estimator.params.prior``) and, for an estimator that models
+    the rows' noise, the structure's noise operators and the rows' errors; then its verdict on
+    the intervals (:meth:`Estimator.trust_verdict`)."""
     fit = _Fit()
     cand = (estimator_cfg.get("extra_candidates") or {}).get("degree")
     prior = _run_prior(model, estimator_cfg, fit.metrics)
@@ -244,9 +248,10 @@ def fit_regression(model, structure, estimator_cfg: dict, records, seed: int = 0
 
 
 def _neighbours(model, structure, records, prepared: dict, seed: int) -> dict:
-    """Per equation the terms the model lacks (its states' monomials up to ``trust.NEIGHBOUR_DEGREE``,
-    ``Model.candidates``) on the same training rows as ``prepared``; empty where the model has no candidates or
-    the structure's processing does not keep the same rows."""
+    """Per equation the terms the model lacks (its states' monomials up to
+    ``trust.NEIGHBOUR_DEGREE``, ``Model.candidates``) on the same training rows as ``prepared``;
+    empty where the model has no candidates or the structure's processing does not keep the same
+    rows."""
     try:
         built = regression_rows(model, structure, records, candidates=NEIGHBOUR_DEGREE)
     except NotImplementedError:
@@ -260,8 +265,8 @@ def _neighbours(model, structure, records, prepared: dict, seed: int) -> dict:
 
 
 def _run_prior(model, estimator_cfg: dict, metrics: dict) -> dict | None:
-    """The run's prior knowledge of the coefficients (``estimator.params.prior``: map, emcee), per regression
-    column, or None; its source goes to ``metrics``."""
+    """The run's prior knowledge of the coefficients (``estimator.params.prior``: map, emcee),
+    per regression column, or None; its source goes to ``metrics``."""
     prior_cfg = (estimator_cfg.get("params") or {}).get("prior")
     prior = prior_for(model, prior_cfg)
     if prior is not None:
@@ -271,12 +276,14 @@ def _run_prior(model, estimator_cfg: dict, metrics: dict) -> dict | None:
 
 
 def _equation_prior(prior: dict | None, names) -> dict | None:
-    """The run's prior restricted to one equation's columns, in their order (None without a prior)."""
+    """The run's prior restricted to one equation's columns, in their order (None without a
+    prior)."""
     return None if prior is None else {n: prior[n] for n in names if n in prior}
 
 
 def _collinearity_metrics(eq: str, pr: Prepared, metrics: dict) -> dict:
-    """One equation's structure report and multicollinearity into ``metrics``; its collinearity artefact entry."""
+    """One equation's structure report and multicollinearity into ``metrics``; its collinearity
+    artefact entry."""
     names = list(pr.X.columns)
     for k, v in pr.report.items():
         metrics[f"{k}_{eq}"] = v
@@ -289,8 +296,9 @@ def _collinearity_metrics(eq: str, pr: Prepared, metrics: dict) -> dict:
 
 
 def _record_equation(eq: str, est, pr: Prepared, coef: np.ndarray, fit: _Fit) -> None:
-    """One equation's fit into ``fit``: residual metrics on the training and held-out rows, the estimator's
-    scalar diagnostics and artefacts, a coefficient row per column and the posterior draws."""
+    """One equation's fit into ``fit``: residual metrics on the training and held-out rows, the
+    estimator's scalar diagnostics and artefacts, a coefficient row per column and the posterior
+    draws."""
     names = list(pr.X.columns)
     intercept = _learned(est, "intercept_", 0.0)
     resid = pr.y - pr.X.to_numpy() @ coef - intercept
@@ -323,8 +331,8 @@ def _record_equation(eq: str, est, pr: Prepared, coef: np.ndarray, fit: _Fit) ->
 
 
 def _report_physical(model, coefs: dict, fit: _Fit) -> None:
-    """Nomoto models: report the physical parameters (K, T, ...), with intervals from the draws, and keep the
-    regression coefficients as metrics (``coef_<equation>_<name>``)."""
+    """Nomoto models: report the physical parameters (K, T, ...), with intervals from the draws,
+    and keep the regression coefficients as metrics (``coef_<equation>_<name>``)."""
     physical = model.physical({n: v for n, v in coefs.items() if n in _all(model.equations)})
     if model.type != "nomoto":
         return
@@ -336,10 +344,10 @@ def _report_physical(model, coefs: dict, fit: _Fit) -> None:
 
 def parameter_rows(coef_rows: list, truth: dict, truth_kind: str, bias_sd: dict, scales: dict,
                    other: dict | None = None) -> list:
-    """The results table's parameter rows: estimate, truth (0 for a candidate the truth model lacks), the
-    estimator's extras, the truncation bias in posterior sd, and the error scaled by the term's weight.
-    ``other``: ``{name: (truth or None, truth kind or None for truth_kind)}`` of parameters the model's truth
-    lacks but the fit knows (an effect's parameters)."""
+    """The results table's parameter rows: estimate, truth (0 for a candidate the truth model
+    lacks), the estimator's extras, the truncation bias in posterior sd, and the error scaled by
+    the term's weight. ``other``: ``{name: (truth or None, truth kind or None for truth_kind)}``
+    of parameters the model's truth lacks but the fit knows (an effect's parameters)."""
     params = []
     other = other or {}
     for eq, n, v, extra in coef_rows:
@@ -362,8 +370,9 @@ def parameter_rows(coef_rows: list, truth: dict, truth_kind: str, bias_sd: dict,
 
 
 def drift_metrics(params: list, truth: dict) -> dict:
-    """Relative errors against the truth (median, max, mean over the run; median per equation, never pooled
-    across equations in a claim) and the scaled errors' median and max per equation. No truth: no drift."""
+    """Relative errors against the truth (median, max, mean over the run; median per equation,
+    never pooled across equations in a claim) and the scaled errors' median and max per equation.
+    No truth: no drift."""
     out = {}
     rel = [abs(p["estimate"] - p["truth"]) / abs(p["truth"]) for p in params
            if p["truth"] and p["name"] in truth and p["estimate"] is not None]
@@ -383,8 +392,9 @@ def drift_metrics(params: list, truth: dict) -> dict:
 
 
 def posterior_draws(model, structure, samples: dict, estimates: dict) -> dict:
-    """At most :data:`MAX_DRAWS` posterior draws (evenly thinned) of every reported parameter, in physical
-    parameters (a Nomoto regression's coefficients mapped by the model); empty unless every one has draws."""
+    """At most :data:`MAX_DRAWS` posterior draws (evenly thinned) of every reported parameter, in
+    physical parameters (a Nomoto regression's coefficients mapped by the model); empty unless
+    every one has draws."""
     if not samples:
         return {}
     phys = samples if structure.simulates or model.type != "nomoto" else model.physical(samples)
@@ -398,7 +408,8 @@ def posterior_draws(model, structure, samples: dict, estimates: dict) -> dict:
 
 # ---------------------------------------------------------------------- the output-error problem of a run
 def equation_error_start(model, records) -> dict:
-    """Least squares on central differences (equation error): the output-error problem's initial estimate."""
+    """Least squares on central differences (equation error): the output-error problem's initial
+    estimate."""
     from .structures import make_structure
 
     ident = identify(model, make_structure({"name": "central"}),
@@ -408,8 +419,9 @@ def equation_error_start(model, records) -> dict:
 
 
 def make_problem(model, structure, records, seed: int = 0):
-    """The output-error problem (``study.identify.output_error.OutputErrorProblem``) of a study run from the
-    ``output_error`` block of the structure config, centred on the equation-error estimate."""
+    """The output-error problem (``study.identify.output_error.OutputErrorProblem``) of a study
+    run from the ``output_error`` block of the structure config, centred on the equation-error
+    estimate."""
     from .output_error import OutputErrorProblem, default_bounds
 
     cfg = structure.output_error or {}
@@ -421,9 +433,9 @@ def make_problem(model, structure, records, seed: int = 0):
 
 
 def truncation_bias(est, pr, rows, coef, names) -> dict:
-    """{regression column: its estimated truncation bias} of one equation: the rows' truncation errors at the
-    estimate, through the post-processing's row map and the posterior's GLS map (``est.row_noise_``'s whitening;
-    least squares where the rows were not whitened)."""
+    """{regression column: its estimated truncation bias} of one equation: the rows' truncation
+    errors at the estimate, through the post-processing's row map and the posterior's GLS map
+    (``est.row_noise_``'s whitening; least squares where the rows were not whitened)."""
     from .truncation import coefficient_bias
 
     if rows is None or pr.row_map is None or rows[1].shape[1] != len(coef):
@@ -436,8 +448,9 @@ def truncation_bias(est, pr, rows, coef, names) -> dict:
 
 
 def _bias_in_sd(model, coefs: dict, bias: dict, coef_rows: list) -> dict:
-    """{reported parameter: estimated truncation bias / posterior sd}. Nomoto models report K, T, alpha: their
-    bias is the model's own map of the biased regression coefficients minus that of the estimate."""
+    """{reported parameter: estimated truncation bias / posterior sd}. Nomoto models report K, T,
+    alpha: their bias is the model's own map of the biased regression coefficients minus that of
+    the estimate."""
     sd = {n: extra.get("std") for _, n, _, extra in coef_rows}
     if getattr(model, "type", None) == "nomoto" and bias:
         own = {n: v for n, v in coefs.items() if n in _all(model.equations)}
@@ -458,8 +471,9 @@ def _num(x):
 
 
 def _learned(est, attr: str, default=None):
-    """An optional learned attribute of a fitted estimator (``samples_``, ``selected_``, ``coef_std_``, ...:
-    the contract in ``study.identify.estimators.base``), or ``default`` where the estimator sets none."""
+    """An optional learned attribute of a fitted estimator (``samples_``, ``selected_``,
+    ``coef_std_``, ...: the contract in ``study.identify.estimators.base``), or ``default`` where
+    the estimator sets none."""
     return getattr(est, attr, default)
 
 

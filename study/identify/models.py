@@ -1,23 +1,26 @@
-"""Identification models: what is identified, how its regression rows are built, and what its truth is.
+"""Identification models: what is identified, how its regression rows are built, and what its truth
+is.
 
 A model config (``conf/model/<name>.yaml``) has a ``type``:
 
 - ``kind``: the coefficients of a vessel kind's own force model (``mmg_hull``, ``mmg_simplified``,
-  ``usv_full``, ``abkowitz``, ``auv``). The regressors are read off the kind's compiled equations of motion
-  (:mod:`study.identify.regression`), so the physics is written once. Known parts come from the vessel: mass,
-  added mass, propeller and rudder forces, and every coefficient the model neither identifies nor ``omit``\\ s.
-  Omitted terms are zero in the model. The truth is the vessel's value of each coefficient: *exact* when the
-  omitted terms are zero in the truth vessel, otherwise *approximate* (and the report says which terms differ).
+  ``usv_full``, ``abkowitz``, ``auv``). The regressors are read off the kind's compiled equations of
+  motion (:mod:`study.identify.regression`), so the physics is written once. Known parts come from
+  the vessel: mass, added mass, propeller and rudder forces, and every coefficient the model neither
+  identifies nor ``omit``\\ s. Omitted terms are zero in the model. The truth is the vessel's value
+  of each coefficient: *exact* when the omitted terms are zero in the truth vessel, otherwise
+  *approximate* (and the report says which terms differ).
 - ``nomoto``: the first- or second-order Nomoto (KT) response model, linear or with the cubic term
   (Nomoto et al. 1957; nonlinear form of Zheng & Xiao 2017, eqs. 12-13)::
 
       order 1:  T r' + r + alpha r^3 = K delta
       order 2:  T1 T2 r'' + (T1 + T2) r' + r + alpha r^3 = K delta + K T3 delta'
 
-  regressed as r' (or r'') on r, r^3, delta (and r', delta'); K, T, alpha (T1, T2, T3) follow from the
-  regression coefficients (:meth:`NomotoModel.physical`). The truth is *exact* for a Nomoto-kind vessel and
-  *derived* for any other: linearised sway-yaw dynamics for K, T (T1, T2, T3) and a fit to the vessel's steady
-  turns for alpha (:mod:`study.sim.linearize`); labelled so in the parameter table.
+  regressed as r' (or r'') on r, r^3, delta (and r', delta'); K, T, alpha (T1, T2, T3) follow from
+  the regression coefficients (:meth:`NomotoModel.physical`). The truth is *exact* for a Nomoto-kind
+  vessel and *derived* for any other: linearised sway-yaw dynamics for K, T (T1, T2, T3) and a fit
+  to the vessel's steady turns for alpha (:mod:`study.sim.linearize`); labelled so in the parameter
+  table.
 """
 from __future__ import annotations
 
@@ -42,7 +45,8 @@ class Rows:
 
 
 def force_scales(vessel: Vessel) -> np.ndarray:
-    """0.5 rho L d U0^2 (X, Y) and 0.5 rho L^2 d U0^2 (N): keeps the regression O(1) in the kind's units."""
+    """0.5 rho L d U0^2 (X, Y) and 0.5 rho L^2 d U0^2 (N): keeps the regression O(1) in the
+    kind's units."""
     p = vessel.cfg["particulars"]
     q = 0.5 * float(p["rho"]) * float(p["Lpp"]) * float(p["d"]) * vessel.U0 ** 2
     return np.array([q, q, q * float(p["Lpp"])])
@@ -63,7 +67,8 @@ class Model:
 
     @property
     def effects(self) -> tuple:
-        """The effects identified with the model (``model.effects``: names of ``conf/effect``), empty for none."""
+        """The effects identified with the model (``model.effects``: names of ``conf/effect``),
+        empty for none."""
         return tuple(self.cfg.get("effects") or ())
 
     # -- to be provided
@@ -98,12 +103,14 @@ class Model:
         raise NotImplementedError
 
     def truth_guess(self) -> dict:
-        """Any valid parameter set (used only to build the simulation vessel; values are replaced)."""
+        """Any valid parameter set (used only to build the simulation vessel; values are
+        replaced)."""
         return {n: 0.0 for n in self.oe_names}
 
 
 def _pass_through(vessel: Vessel) -> Vessel:
-    """The vessel with its steering gear switched off: a replayed rudder angle is applied as measured."""
+    """The vessel with its steering gear switched off: a replayed rudder angle is applied as
+    measured."""
     return vessel.with_params(rudder_rate=0.0, rudder_lag=0.0, rudder_delay=0.0, delta_max=math.pi)
 
 
@@ -151,7 +158,8 @@ class KindModel(Model):
         return False, ""
 
     def rows(self, seg, structure):
-        """Rows M (a_measured - a_known) = sum_i theta_i phi_i per equation (see study.identify.regression)."""
+        """Rows M (a_measured - a_known) = sum_i theta_i phi_i per equation (see
+        study.identify.regression)."""
         from .regression import kind_regressors
 
         ops = structure.ops(seg, self.order)
@@ -166,8 +174,9 @@ class KindModel(Model):
         return out
 
     def candidates(self, seg, structure, degree):
-        """Non-dimensional monomials (U/U0)^2 v'^a r'^b delta^c, 1 <= a + b + c <= degree (SINDy's extra
-        library), in the units of the scaled equations; columns duplicating a model term are dropped later."""
+        """Non-dimensional monomials (U/U0)^2 v'^a r'^b delta^c, 1 <= a + b + c <= degree
+        (SINDy's extra library), in the units of the scaled equations; columns duplicating a
+        model term are dropped later."""
         ops = structure.ops(seg, self.order)
         nd = structure.nodes(seg)
         U = np.sqrt(nd["u"] ** 2 + nd["v"] ** 2)
@@ -253,7 +262,8 @@ class NomotoModel(Model):
         return {"N": Rows(Phi, y, np.zeros(len(ops), int))}
 
     def candidates(self, seg, structure, degree):
-        """Monomials r^a delta^b (1 <= a + b <= degree) and r|r|, delta|delta| (SINDy's extra library)."""
+        """Monomials r^a delta^b (1 <= a + b <= degree) and r|r|, delta|delta| (SINDy's extra
+        library)."""
         ops = structure.ops(seg, self.order)
         nd = structure.nodes(seg)
         r, d = nd["r"], nd["delta"]
@@ -269,7 +279,8 @@ class NomotoModel(Model):
         return names, np.column_stack(cols)
 
     def physical(self, coefs):
-        """K, T, alpha (T1, T2, T3) from the regression coefficients; arrays give arrays (posterior draws).
+        """K, T, alpha (T1, T2, T3) from the regression coefficients; arrays give arrays (posterior
+        draws).
 
         order 1: r' = c_r r + c_r3 r^3 + c_delta delta  ->  T = -1/c_r, K = c_delta T, alpha = -c_r3 T.
         order 2: r'' = a1 r' + a2 r + a3 r^3 + b1 delta + b2 delta'  ->  T1 T2 = -1/a2, T1 + T2 = a1/a2,
@@ -298,8 +309,9 @@ class NomotoModel(Model):
         return {k: (float(v) if np.ndim(v) == 0 else v) for k, v in out.items()}
 
     def regression_from_physical(self, phys: dict) -> dict:
-        """The regression coefficients of K, T, alpha (T1, T2, T3): the inverse of :meth:`physical` (a prior
-        given on the physical parameters becomes a prior on the regression's columns)."""
+        """The regression coefficients of K, T, alpha (T1, T2, T3): the inverse of
+        :meth:`physical` (a prior given on the physical parameters becomes a prior on the
+        regression's columns)."""
         K, a = float(phys["K"]), float(phys.get("alpha", 0.0))
         if self.order == 1:
             T = float(phys["T"])
@@ -368,8 +380,9 @@ class NomotoModel(Model):
 
 
 def nomoto_vessel_config(vessel: Vessel, phys: dict, order: int) -> dict:
-    """A ``nomoto``-kind vessel config with the given K, T (T1, T2, T3), alpha, and the particulars, steering
-    gear, windage and operating speed of ``vessel`` (the model predicts that ship's response)."""
+    """A ``nomoto``-kind vessel config with the given K, T (T1, T2, T3), alpha, and the
+    particulars, steering gear, windage and operating speed of ``vessel`` (the model predicts
+    that ship's response)."""
     cfg = {k: (dict(v) if isinstance(v, dict) else v) for k, v in vessel.cfg.items()
            if k in ("particulars", "mass", "actuator", "windage", "operation", "description")}
     cfg["name"] = f"nomoto_model_of_{vessel.name}"

@@ -1,24 +1,27 @@
-"""The output-error problem: simulate a model through measured records and compare its outputs with them.
+"""The output-error problem: simulate a model through measured records and compare its outputs with
+them.
 
 Zheng & Xiao (2017, Sec. 3.2, eqs. 18-19) integrates the KT equations with the measured rudder and
-compares the heading with the record ("integral" samples, as against finite differences); several records
-(or phases of one) enter one objective at once, its "parallel processing" (Sec. 1.2). Here any model that can
-be simulated does the same: each record segment (cut at dropouts) is replayed open loop from its first
-measured state with its measured rudder angle and propeller speed (``study.sim.replay``, the steering gear
-switched off so the measured angle acts as measured), every candidate parameter set of a batch in one
-vectorised call of the compiled integrator.
+compares the heading with the record ("integral" samples, as against finite differences); several
+records (or phases of one) enter one objective at once, its "parallel processing" (Sec. 1.2). Here
+any model that can be simulated does the same: each record segment (cut at dropouts) is replayed
+open loop from its first measured state with its measured rudder angle and propeller speed
+(``study.sim.replay``, the steering gear switched off so the measured angle acts as measured), every
+candidate parameter set of a batch in one vectorised call of the compiled integrator.
 
-Outputs and weights: the channels compared (``outputs``; default the model's own: u, v, r for force models,
-r and psi for Nomoto models) are each divided by their spread over the records, so that
-``cost = sum_c SSE_c / s_c^2 / N``, a mean normalised squared error (dimensionless, comparable across
-channels). ``sse`` gives the raw per-channel sums for a likelihood with one noise scale per channel.
+Outputs and weights: the channels compared (``outputs``; default the model's own: u, v, r for force
+models, r and psi for Nomoto models) are each divided by their spread over the records, so that
+``cost = sum_c SSE_c / s_c^2 / N``, a mean normalised squared error (dimensionless, comparable
+across channels). ``sse`` gives the raw per-channel sums for a likelihood with one noise scale per
+channel.
 
-Divergence is a result, not a crash: a candidate whose replay leaves the physical envelope (:data:`ENVELOPE`:
-speed, yaw rate, sway) or overflows is stopped there -- none of its outputs count -- and penalised
-(:data:`DIVERGED`); the problem counts such candidates (``n_diverged``, in the run's metrics as
-``oe_diverged_candidates``). Before, a replay at 8e189 was finite, escaped the penalty, and made the Gauss-Newton
-polish fail ("array must not contain infs or NaNs"); the polish is now skipped when its Jacobian cannot be
-formed (a perturbed candidate diverged), keeping the best point it had (``oe_polish_skipped``).
+Divergence is a result, not a crash: a candidate whose replay leaves the physical envelope
+(:data:`ENVELOPE`: speed, yaw rate, sway) or overflows is stopped there -- none of its outputs count
+-- and penalised (:data:`DIVERGED`); the problem counts such candidates (``n_diverged``, in the
+run's metrics as ``oe_diverged_candidates``). Before, a replay at 8e189 was finite, escaped the
+penalty, and made the Gauss-Newton polish fail ("array must not contain infs or NaNs"); the polish
+is now skipped when its Jacobian cannot be formed (a perturbed candidate diverged), keeping the best
+point it had (``oe_polish_skipped``).
 """
 from __future__ import annotations
 
@@ -41,8 +44,8 @@ ENVELOPE = {"speed_U0": 5.0, "r_U0_L": 20.0, "v_U0": 2.0}
 
 
 def leaves_envelope(sim: np.ndarray, U0: float, L: float) -> np.ndarray:
-    """(B,) True for each member of a replay ``sim`` (n, >= 6 columns u, v, r, x0, y0, psi, B) that overflows
-    or leaves :data:`ENVELOPE` of a ship of service speed ``U0`` and length ``L``."""
+    """(B,) True for each member of a replay ``sim`` (n, >= 6 columns u, v, r, x0, y0, psi, B)
+    that overflows or leaves :data:`ENVELOPE` of a ship of service speed ``U0`` and length ``L``."""
     with np.errstate(over="ignore", invalid="ignore"):
         u, v, r = sim[:, 0, :], sim[:, 1, :], sim[:, 2, :]
         out = ~np.all(np.isfinite(sim[:, :6, :]), axis=(0, 1))
@@ -59,7 +62,8 @@ _POOL = None
 
 
 def _pool():
-    """Two worker threads, made on first use (a batch is split in two whatever the number of cores)."""
+    """Two worker threads, made on first use (a batch is split in two whatever the number of
+    cores)."""
     global _POOL
     if _POOL is None:
         from concurrent.futures import ThreadPoolExecutor
@@ -69,7 +73,8 @@ def _pool():
 
 
 class OutputErrorProblem:
-    """Replay ``model`` through record segments; ``names``/``bounds``/``x0`` describe the parameters.
+    """Replay ``model`` through record segments; ``names``/``bounds``/``x0`` describe the
+    parameters.
 
     Parameters
     ----------
@@ -83,7 +88,8 @@ class OutputErrorProblem:
     substeps : int
         Integration steps per record sample (accuracy of the replay).
     start_window : int
-        Samples of the quadratic fit that gives each segment's initial state (see :func:`initial_value`).
+        Samples of the quadratic fit that gives each segment's initial state (see
+        :func:`initial_value`).
     """
 
     def __init__(self, model, records, outputs=None, x0=None, bounds=None, substeps: int = 1,
@@ -161,13 +167,14 @@ class OutputErrorProblem:
         return len(self.model_names)
 
     def simulate(self, theta) -> list:
-        """Predicted outputs per segment, each (n_i, n_outputs, B), for parameter sets ``theta`` (k, B): the
-        model's parameters, then the estimated initial states.
+        """Predicted outputs per segment, each (n_i, n_outputs, B), for parameter sets ``theta`` (k,
+        B): the model's parameters, then the estimated initial states.
 
-        A batch of at least ``2 * SPLIT_MIN`` members is simulated as two halves in two threads (the compiled
-        integrator releases the GIL), so both cores work; the split depends on the batch size only, never on
-        the number of cores, so results are the same on any machine (each half runs the vectorised member loop;
-        ``tests/test_speed_paths.py`` checks a split batch against one call)."""
+        A batch of at least ``2 * SPLIT_MIN`` members is simulated as two halves in two threads
+        (the compiled integrator releases the GIL), so both cores work; the split depends on the
+        batch size only, never on the number of cores, so results are the same on any machine
+        (each half runs the vectorised member loop; ``tests/test_speed_paths.py`` checks a split
+        batch against one call)."""
         theta = np.asarray(theta, float)
         if theta.ndim == 1:
             theta = theta[:, None]
@@ -188,7 +195,8 @@ class OutputErrorProblem:
         return out
 
     def _simulate(self, theta) -> tuple[list, np.ndarray]:
-        """(outputs per segment, (B,) members that left the envelope) of one batch, without side effects."""
+        """(outputs per segment, (B,) members that left the envelope) of one batch, without side
+        effects."""
         B = theta.shape[1]
         P = self.model.oe_pack(theta[:self.k_model])
         out = []
@@ -223,8 +231,8 @@ class OutputErrorProblem:
         return float(c[0]) if single else c
 
     def residuals(self, theta, scale=None) -> np.ndarray:
-        """Normalised residuals stacked over segments and channels, (N_total * n_outputs, B); each channel
-        divided by its spread, or by ``scale`` (n_outputs,) when given."""
+        """Normalised residuals stacked over segments and channels, (N_total * n_outputs, B);
+        each channel divided by its spread, or by ``scale`` (n_outputs,) when given."""
         preds = self.simulate(theta)
         sc = self.scale if scale is None else np.asarray(scale, float)
         with np.errstate(over="ignore", invalid="ignore"):
@@ -235,8 +243,9 @@ class OutputErrorProblem:
         return np.where(np.isfinite(r), r, math.sqrt(DIVERGED))
 
     def summary(self, theta) -> dict:
-        """RMSE per output channel and the normalised cost at ``theta`` (for the results table; inf when its
-        replay diverges, with ``diverged`` 1), and how many candidates simulated so far diverged."""
+        """RMSE per output channel and the normalised cost at ``theta`` (for the results table;
+        inf when its replay diverges, with ``diverged`` 1), and how many candidates simulated so
+        far diverged."""
         counts = {"simulations": self.n_sim, "diverged_candidates": self.n_diverged,
                   "polish_skipped": self.polish_skipped}
         S = self.sse(np.asarray(theta, float).reshape(self.k, 1))[:, 0]
@@ -250,8 +259,9 @@ class OutputErrorProblem:
 
 
 def noise_sd(x: np.ndarray) -> float:
-    """White-noise standard deviation of a smooth signal from its second differences (variance 6 sigma^2 for
-    white noise), made robust by the median absolute deviation (1.4826 MAD estimates a normal sigma)."""
+    """White-noise standard deviation of a smooth signal from its second differences (variance 6
+    sigma^2 for white noise), made robust by the median absolute deviation (1.4826 MAD estimates
+    a normal sigma)."""
     d2 = np.diff(np.asarray(x, float), 2)
     if len(d2) < 5:
         return 0.0
@@ -259,10 +269,11 @@ def noise_sd(x: np.ndarray) -> float:
 
 
 def initial_value(t: np.ndarray, x: np.ndarray, window: int = 31) -> float:
-    """A segment's initial value from a least-squares quadratic through its first samples, not its first
-    (noisy) sample: a replay starts from this state, and an error in it -- a heading offset above all -- would
-    bias every later output (measured: 2 % on K, T of a KT model at 2 % noise). At most a tenth of the segment
-    is used, and the first sample alone when that is fewer than 5 samples."""
+    """A segment's initial value from a least-squares quadratic through its first samples, not
+    its first (noisy) sample: a replay starts from this state, and an error in it -- a heading
+    offset above all -- would bias every later output (measured: 2 % on K, T of a KT model at 2 %
+    noise). At most a tenth of the segment is used, and the first sample alone when that is fewer
+    than 5 samples."""
     w = min(int(window), len(t) // 10)
     if w < 5:
         return float(x[0])
@@ -273,11 +284,12 @@ def initial_value(t: np.ndarray, x: np.ndarray, window: int = 31) -> float:
 def default_bounds(model, x0: dict | None, cfg: dict) -> np.ndarray:
     """The search box of the output-error parameters.
 
-    Nomoto models: a box in non-dimensional terms (K' = K L/U0, T' = T U0/L, alpha' = alpha (U0/L)^2; model
-    config ``oe_bounds``, defaults wide enough for any merchant ship: K' in [0.01, 20], T' in [0.01, 50],
-    T3' in [0, 50], alpha' in [-1e4, 1e4]: the Mariner's is 103) -- independent of any initial estimate, as Zheng & Xiao's (2017) DE is.
-    Force models: around the equation-error estimate x0, +- ``relative`` x |x0| but at least ``floor`` x the
-    largest |x0| of the same equation (structure config ``output_error.bounds``; defaults 1.0 and 0.05).
+    Nomoto models: a box in non-dimensional terms (K' = K L/U0, T' = T U0/L, alpha' = alpha
+    (U0/L)^2; model config ``oe_bounds``, defaults wide enough for any merchant ship: K' in [0.01,
+    20], T' in [0.01, 50], T3' in [0, 50], alpha' in [-1e4, 1e4]: the Mariner's is 103) --
+    independent of any initial estimate, as Zheng & Xiao's (2017) DE is. Force models: around the
+    equation-error estimate x0, +- ``relative`` x |x0| but at least ``floor`` x the largest |x0| of
+    the same equation (structure config ``output_error.bounds``; defaults 1.0 and 0.05).
     """
     names = model.oe_names
     if model.type == "nomoto":
@@ -302,16 +314,17 @@ def default_bounds(model, x0: dict | None, cfg: dict) -> np.ndarray:
 
 
 def local_fit(problem: OutputErrorProblem, x0, max_nfev: int = 200, scale=None):
-    """Bounded Gauss-Newton (scipy's trust-region-reflective ``least_squares``) on the normalised residuals,
-    the Jacobian by forward differences of all k parameters in ONE batch simulation. ``scale``: the channels'
-    divisors of the residuals (default their spreads; emcee's Laplace approximation passes the noise scales).
+    """Bounded Gauss-Newton (scipy's trust-region-reflective ``least_squares``) on the normalised
+    residuals, the Jacobian by forward differences of all k parameters in ONE batch simulation.
+    ``scale``: the channels' divisors of the residuals (default their spreads; emcee's Laplace
+    approximation passes the noise scales).
 
-    Returns ``scipy.optimize.OptimizeResult`` with ``x``, ``fun`` (the cost), ``success``, ``nfev`` and
-    ``cov`` (Gauss-Newton covariance of x for unit residual variance; None if singular), ``jac`` (the
-    Jacobian of the normalised residuals at x, rows as in :meth:`OutputErrorProblem.residuals`; None when the fit
-    was skipped) and ``skipped``: when a replay the Jacobian needs diverges (or the start itself does), the fit
-    stops and returns the best point it evaluated (``success`` False, ``skipped`` True, the reason in
-    ``message``) instead of failing the run.
+    Returns ``scipy.optimize.OptimizeResult`` with ``x``, ``fun`` (the cost), ``success``, ``nfev``
+    and ``cov`` (Gauss-Newton covariance of x for unit residual variance; None if singular), ``jac``
+    (the Jacobian of the normalised residuals at x, rows as in :meth:`OutputErrorProblem.residuals`;
+    None when the fit was skipped) and ``skipped``: when a replay the Jacobian needs diverges (or
+    the start itself does), the fit stops and returns the best point it evaluated (``success``
+    False, ``skipped`` True, the reason in ``message``) instead of failing the run.
     """
     from scipy.optimize import OptimizeResult, least_squares
 

@@ -1,11 +1,13 @@
-"""emcee's posteriors as ArviZ ``InferenceData``: the chains a run saved (one ``chain.npz`` per equation for the
-regression likelihoods, one for output error), joined into one posterior, with ArviZ's r-hat and effective sample
-sizes (Vehtari et al. 2021, rank-normalised split-R-hat and bulk / tail ESS).
+"""emcee's posteriors as ArviZ ``InferenceData``: the chains a run saved (one ``chain.npz`` per
+equation for the regression likelihoods, one for output error), joined into one posterior, with
+ArviZ's r-hat and effective sample sizes (Vehtari et al. 2021, rank-normalised split-R-hat and bulk
+/ tail ESS).
 
-The walkers of the affine-invariant ensemble are taken as ArviZ's chains, as ``arviz.from_emcee`` does; they are
-not independent chains, so r-hat over walkers says whether the ensemble has mixed, not more. The equations are
-sampled independently, so their draws, truncated to the shortest chain and the fewest walkers of any equation,
-pair up into draws of the joint posterior of every coefficient.
+The walkers of the affine-invariant ensemble are taken as ArviZ's chains, as ``arviz.from_emcee``
+does; they are not independent chains, so r-hat over walkers says whether the ensemble has mixed,
+not more. The equations are sampled independently, so their draws, truncated to the shortest chain
+and the fewest walkers of any equation, pair up into draws of the joint posterior of every
+coefficient.
 """
 from __future__ import annotations
 
@@ -22,10 +24,11 @@ def _load(src) -> dict:
 
 
 def inference_data(chains: dict, attrs: dict | None = None):
-    """One ``arviz.InferenceData`` from ``{equation: chain.npz (bytes or path)}`` (``""`` for an output-error
-    run's single chain): group ``posterior`` with a variable per coefficient (``<equation>.<name>``, or the name
-    alone), dims ``(chain, draw)`` = (walker, saved step); group ``sample_stats`` with each equation's log
-    posterior (``lp`` or ``lp_<equation>``). ``attrs``: written into both groups (run id, configuration...)."""
+    """One ``arviz.InferenceData`` from ``{equation: chain.npz (bytes or path)}`` (``""`` for an
+    output-error run's single chain): group ``posterior`` with a variable per coefficient
+    (``<equation>.<name>``, or the name alone), dims ``(chain, draw)`` = (walker, saved step);
+    group ``sample_stats`` with each equation's log posterior (``lp`` or ``lp_<equation>``).
+    ``attrs``: written into both groups (run id, configuration...)."""
     import arviz as az
 
     if not chains:
@@ -44,14 +47,16 @@ def inference_data(chains: dict, attrs: dict | None = None):
 
 
 def diagnostics(idata):
-    """ArviZ's r-hat and bulk / tail effective sample sizes of every coefficient (a DataFrame indexed by it)."""
+    """ArviZ's r-hat and bulk / tail effective sample sizes of every coefficient (a DataFrame
+    indexed by it)."""
     import arviz as az
 
     return az.summary(idata, kind="diagnostics", round_to="none")[["r_hat", "ess_bulk", "ess_tail", "mcse_mean"]]
 
 
 def run_chains(artefact_dir) -> dict:
-    """``{equation: path}`` of the chains a run saved under its artefact folder (``""``: output error)."""
+    """``{equation: path}`` of the chains a run saved under its artefact folder (``""``: output
+    error)."""
     d = Path(artefact_dir)
     out = {}
     if (d / "chain.npz").is_file():

@@ -1,19 +1,20 @@
-"""Prior knowledge of a model's coefficients: a mean and a standard deviation for each, from where a naval
-architect would take them.
+"""Prior knowledge of a model's coefficients: a mean and a standard deviation for each, from where a
+naval architect would take them.
 
 Sources (``prior.source`` of an estimator or of the doctor):
 
-- ``vessel``: the vessel config's own coefficients (published captive-test or CFD values). In a simulation
-  they ARE the truth, so a study on simulated records that uses them says so (``prior_is_truth``).
-- ``empirical``: regressions on the main particulars (MMG kind only, :func:`empirical_mmg_hull`), for a
-  vessel with no published set. Independent of any vessel config's coefficients.
-- ``offset``: the truth moved by ``offset`` (relative), alternately up and down coefficient by coefficient
-  (the first up): a study device that stands for "a published set from another basin, some 20 % off", never
-  the truth itself.
+- ``vessel``: the vessel config's own coefficients (published captive-test or CFD values). In a
+  simulation they ARE the truth, so a study on simulated records that uses them says so
+  (``prior_is_truth``).
+- ``empirical``: regressions on the main particulars (MMG kind only, :func:`empirical_mmg_hull`),
+  for a vessel with no published set. Independent of any vessel config's coefficients.
+- ``offset``: the truth moved by ``offset`` (relative), alternately up and down coefficient by
+  coefficient (the first up): a study device that stands for "a published set from another basin,
+  some 20 % off", never the truth itself.
 
-The standard deviation of each coefficient is ``sd`` (relative) times its prior size, at least ``sd`` times
-the median size of the model's nonzero prior coefficients (a coefficient given as 0 is not known to be 0).
-Assumption labelled: independent priors, no correlation between coefficients.
+The standard deviation of each coefficient is ``sd`` (relative) times its prior size, at least
+``sd`` times the median size of the model's nonzero prior coefficients (a coefficient given as 0 is
+not known to be 0). Assumption labelled: independent priors, no correlation between coefficients.
 """
 from __future__ import annotations
 
@@ -29,17 +30,20 @@ LINEAR_MMG = ("Yv", "Yr", "Nv", "Nr")
 
 
 def empirical_mmg_hull(particulars: dict, m_nd: float | None = None) -> dict:
-    """MMG hull coefficients (non-dimensional as in Yasukawa & Yoshimura 2015) from the main particulars.
+    """MMG hull coefficients (non-dimensional as in Yasukawa & Yoshimura 2015) from the main
+    particulars.
 
-    Linear derivatives: Kijima, Katsuno, Nakiri & Furukawa (1990), "On the manoeuvring performance of a ship
-    with the parameter of loading condition", J Soc Nav Arch Japan 168, 141-148 (k = 2d/L)::
+    Linear derivatives: Kijima, Katsuno, Nakiri & Furukawa (1990), "On the manoeuvring performance
+    of a ship with the parameter of loading condition", J Soc Nav Arch Japan 168, 141-148 (k =
+    2d/L)::
 
         Y'v = -(pi/2 k + 1.4 Cb B/L)          N'v = -k
         Y'r = m' + m'x - 1.5 Cb B/L            N'r = -0.54 k + k^2
 
-    Nonlinear terms: the regressions of Yoshimura & Masumoto (2012), "Hydrodynamic database and manoeuvring
-    prediction method with medium high-speed merchant ships and fishing vessels", MARSIM 2012 (as carried by
-    public MMG implementations; the printed tables were not available here: labelled)::
+    Nonlinear terms: the regressions of Yoshimura & Masumoto (2012), "Hydrodynamic database and
+    manoeuvring prediction method with medium high-speed merchant ships and fishing vessels", MARSIM
+    2012 (as carried by public MMG implementations; the printed tables were not available here:
+    labelled)::
 
         X'vv = 1.15 Cb/(L/B) - 0.18            X'rr = -0.085 Cb/(L/B) + 0.008
         X'vr = -m'y + 1.91 Cb/(L/B) - 0.08
@@ -48,10 +52,10 @@ def empirical_mmg_hull(particulars: dict, m_nd: float | None = None) -> dict:
         Y'vrr = -0.26 (1 - Cb) L/B - 0.11      N'vrr = -0.075 (1 - Cb) L/B + 0.098
         Y'rrr = -0.051                         N'rrr = 0.25 Cb B/L - 0.056
 
-    X'vvvv has no regression here: 0 (assumption). R'0 from ITTC 1957 friction with a form factor is left to the
-    caller (it is known from the approach speed and rpm far better than from any regression).
-    Added masses (Zhou, Yan & Feng's regressions as used in MMG practice; labelled: checked against KVLCC2,
-    0.224 and 0.0112 against the published 0.223 and 0.011)::
+    X'vvvv has no regression here: 0 (assumption). R'0 from ITTC 1957 friction with a form factor is
+    left to the caller (it is known from the approach speed and rpm far better than from any
+    regression). Added masses (Zhou, Yan & Feng's regressions as used in MMG practice; labelled:
+    checked against KVLCC2, 0.224 and 0.0112 against the published 0.223 and 0.011)::
 
         m_y/m = 0.882 - 0.54 Cb (1 - 1.6 d/B) - 0.156 (1 - 0.673 Cb) L/B
                 + 0.826 (d/B)(L/B)(1 - 0.678 d/B) - 0.638 Cb (L/B)(d/B)(1 - 0.669 d/B)
@@ -83,10 +87,11 @@ def empirical_mmg_hull(particulars: dict, m_nd: float | None = None) -> dict:
 
 
 def empirical_resistance(particulars: dict, U: float, nu: float = 1.14e-6, form_factor: float = 0.3) -> float:
-    """R'0 = C_T S / (L d) with the ITTC-1957 friction line C_F = 0.075 / (log10 Re - 2)^2, C_T = (1 + k) C_F
-    (no wave resistance at manoeuvring Froude numbers of a full hull: assumption), k = 0.3 (assumption: a
-    typical form factor of a full-form tanker) and the wetted surface by Mumford's formula
-    S = 1.7 L d + Cb L B (Molland, Turnock & Hudson 2017, Sec. 10.3); nu of fresh water at 15 deg C."""
+    """R'0 = C_T S / (L d) with the ITTC-1957 friction line C_F = 0.075 / (log10 Re - 2)^2, C_T =
+    (1 + k) C_F (no wave resistance at manoeuvring Froude numbers of a full hull: assumption), k
+    = 0.3 (assumption: a typical form factor of a full-form tanker) and the wetted surface by
+    Mumford's formula S = 1.7 L d + Cb L B (Molland, Turnock & Hudson 2017, Sec. 10.3); nu of
+    fresh water at 15 deg C."""
     L, B, d, Cb = (float(particulars[k]) for k in ("Lpp", "B", "d", "Cb"))
     Re = U * L / nu
     C_F = 0.075 / (np.log10(Re) - 2.0) ** 2
@@ -95,7 +100,8 @@ def empirical_resistance(particulars: dict, U: float, nu: float = 1.14e-6, form_
 
 
 def empirical_sd(name: str, value: float) -> float:
-    """The empirical prior's standard deviation of one MMG coefficient (see :data:`EMPIRICAL_SD`)."""
+    """The empirical prior's standard deviation of one MMG coefficient (see
+    :data:`EMPIRICAL_SD`)."""
     rel = EMPIRICAL_SD["linear"] if name in LINEAR_MMG else EMPIRICAL_SD["nonlinear"]
     return rel * abs(value)
 
@@ -109,10 +115,12 @@ def vessel_m_nd(vessel) -> float:
 
 
 def prior_for(model, cfg: dict | None) -> dict | None:
-    """``{coefficient: (mean, sd)}`` of the model's regression columns for an estimator's or the doctor's
-    ``prior`` config ``{source: vessel|empirical|offset, sd: 0.3, offset: 0.2}``; None without one.
+    """``{coefficient: (mean, sd)}`` of the model's regression columns for an estimator's or the
+    doctor's ``prior`` config ``{source: vessel|empirical|offset, sd: 0.3, offset: 0.2}``; None
+    without one.
 
-    Raises ValueError (one line, naming the source and the model) when the source has nothing for the model.
+    Raises ValueError (one line, naming the source and the model) when the source has nothing for
+    the model.
     """
     if not cfg or not cfg.get("source"):
         return None

@@ -9,10 +9,10 @@ they are read off the compiled ``accel`` of the kind itself:
 - M^-1: the response to unit external forces (the integrator's Xe, Ye, Ne inputs);
 - phi_i = M (a(theta_i = 1) - a_known).
 
-Rows are scaled by 0.5 rho L d U0^2 (X, Y) and 0.5 rho L^2 d U0^2 (N), so the coefficients stay in the kind's
-own units (non-dimensional for MMG) while the numbers stay O(1). The sample structure decides where the rows
-are (``study.identify.structures``): the node-wise quantities a_known and phi_i go through its ``value``
-operator, the measured velocities through its derivative ``d``.
+Rows are scaled by 0.5 rho L d U0^2 (X, Y) and 0.5 rho L^2 d U0^2 (N), so the coefficients stay in
+the kind's own units (non-dimensional for MMG) while the numbers stay O(1). The sample structure
+decides where the rows are (``study.identify.structures``): the node-wise quantities a_known and
+phi_i go through its ``value`` operator, the measured velocities through its derivative ``d``.
 """
 from __future__ import annotations
 
@@ -24,7 +24,8 @@ STATE_RATES = ("u", "v", "r")
 
 
 def kind_regressors(vessel: Vessel, P0: np.ndarray, idx: list, nodes: dict, raw: dict, ops, scale: np.ndarray):
-    """Targets (m, 3) and regressors (m, 3, k) of one segment for the coefficients at ``idx`` of ``P0``.
+    """Targets (m, 3) and regressors (m, 3, k) of one segment for the coefficients at ``idx`` of
+    ``P0``.
 
     ``nodes``: the segment's columns where the node-wise functions are evaluated (smoothed or raw);
     ``raw``: the measured columns the derivatives are taken of; ``ops``: the structure's operators.

@@ -1,37 +1,41 @@
-"""The errors of regression rows that are no white noise of the target, estimated from the run's own records and
-corrected in emcee's regression likelihood (``likelihood: regression``, ``correct_rows: true``): the structure's
-truncation and the noise of the regressors (errors in variables).
+"""The errors of regression rows that are no white noise of the target, estimated from the run's own
+records and corrected in emcee's regression likelihood (``likelihood: regression``, ``correct_rows:
+true``): the structure's truncation and the noise of the regressors (errors in variables).
 
-Why: the row-noise model (``study.identify.row_noise``) takes the regressors as exact and the structure's stencil
-as the derivative. Neither holds, and both bias the estimate by a posterior sd or more (measured on the KT
-Mariner with ``study.run.calibration``): euler's O(h) truncation 1.55 sd at 0.1 s (its 90 % intervals covered the
-truth 56 % of the time); at 1 s central's truncation 0.5 sd plus the regressors' noise 0.7 sd on the same side
-(70-78 %). A bias estimated from the records is the structure's, not sampling noise, so it is removed, not
+Why: the row-noise model (``study.identify.row_noise``) takes the regressors as exact and the
+structure's stencil as the derivative. Neither holds, and both bias the estimate by a posterior sd
+or more (measured on the KT Mariner with ``study.run.calibration``): euler's O(h) truncation 1.55 sd
+at 0.1 s (its 90 % intervals covered the truth 56 % of the time); at 1 s central's truncation 0.5 sd
+plus the regressors' noise 0.7 sd on the same side (70-78 %). A bias estimated from the records is
+the structure's, not sampling noise, so it is removed, not
 widened.
 
-**Truncation** (``study.identify.truncation``: the stencil's Taylor moments times Savitzky-Golay derivatives of
-the measured signals; within 0.04 posterior sd of the actual bias on the KT at 0.1 s): the rows' truncation
-errors ``(t_y, T_X)`` are subtracted from the rows, ``y - t_y = (X - T_X) theta + e``, before the noise model is
-fitted (at 1 s the truncation was otherwise taken for noise: intervals too wide).
+**Truncation** (``study.identify.truncation``: the stencil's Taylor moments times Savitzky-Golay
+derivatives of the measured signals; within 0.04 posterior sd of the actual bias on the KT at 0.1
+s): the rows' truncation errors ``(t_y, T_X)`` are subtracted from the rows, ``y - t_y = (X - T_X)
+theta + e``, before the noise model is fitted (at 1 s the truncation was otherwise taken for noise:
+intervals too wide).
 
-**Errors in variables** (corrected least squares: Fuller 1987, *Measurement Error Models*, Sec. 2.2; the
-corrected score of Nakamura 1990, Biometrika 77, 127-137): with the measured rows ``X_o = X + N``,
-``y_o = y + eps`` and the whitening ``W``, generalised least squares solves ``X_o' W X_o theta = X_o' W y_o``,
-whose expectation is off by ``E[N' W N] theta - E[N' W eps]``. The corrected normal equations
+**Errors in variables** (corrected least squares: Fuller 1987, *Measurement Error Models*, Sec. 2.2;
+the corrected score of Nakamura 1990, Biometrika 77, 127-137): with the measured rows ``X_o = X +
+N``, ``y_o = y + eps`` and the whitening ``W``, generalised least squares solves ``X_o' W X_o theta
+= X_o' W y_o``, whose expectation is off by ``E[N' W N] theta - E[N' W eps]``. The corrected normal
+equations
 
     (X_o' W X_o - M) theta = X_o' W y_o - g,   M = E[N' W N],  g = E[N' W eps]
 
 are unbiased to first order. ``M`` and ``g`` are not derived per structure: they are averaged over
-``n_probes`` **probes**, each the run's own records with fresh white noise added at the level estimated from each
-channel (``state_estimation.noise_std``: fourth differences, median absolute deviation), passed through the
-structure (``study.identify.rows.regression_rows``) and the training rows' map (differencing, cleaning, split):
-so every structure, its post-processing and nonlinear regressors (r^3) are covered alike. The probes' own Monte
-Carlo error of ``g - M theta`` is added to the covariance (measured per run from the probes' spread).
+``n_probes`` **probes**, each the run's own records with fresh white noise added at the level
+estimated from each channel (``state_estimation.noise_std``: fourth differences, median absolute
+deviation), passed through the structure (``study.identify.rows.regression_rows``) and the training
+rows' map (differencing, cleaning, split): so every structure, its post-processing and nonlinear
+regressors (r^3) are covered alike. The probes' own Monte Carlo error of ``g - M theta`` is added to
+the covariance (measured per run from the probes' spread).
 
-Assumptions (labelled): the measurement noise white per channel, its level the difference method's; the rows
-linear in the noise near the record (a probe's noise is added to the already noisy record; second order in the
-noise for r^3-like regressors); the probed channels are the schema's measured ones (``PROBED_CHANNELS``; a
-command such as ``delta_cmd`` is no measurement).
+Assumptions (labelled): the measurement noise white per channel, its level the difference method's;
+the rows linear in the noise near the record (a probe's noise is added to the already noisy record;
+second order in the noise for r^3-like regressors); the probed channels are the schema's measured
+ones (``PROBED_CHANNELS``; a command such as ``delta_cmd`` is no measurement).
 """
 from __future__ import annotations
 
@@ -56,10 +60,11 @@ N_PROBES = 16
 class RowErrors:
     """What the likelihood needs to correct one equation's training rows (module docstring).
 
-    ``trunc_y`` (n,), ``trunc_X`` (n, k): the rows' truncation errors, through the row map (None: no stencil);
-    ``probes``: a callable yielding ``(N, eps)`` per probe, the change of the training rows (n, k) and target (n,)
-    that one draw of the measurement noise makes (None: no correction of the regressors' noise);
-    ``channel_sd``: per record, the noise level of each probed channel the probes used."""
+    ``trunc_y`` (n,), ``trunc_X`` (n, k): the rows' truncation errors, through the row map (None:
+    no stencil); ``probes``: a callable yielding ``(N, eps)`` per probe, the change of the
+    training rows (n, k) and target (n,) that one draw of the measurement noise makes (None: no
+    correction of the regressors' noise); ``channel_sd``: per record, the noise level of each
+    probed channel the probes used."""
 
     trunc_y: np.ndarray | None = None
     trunc_X: np.ndarray | None = None
@@ -74,15 +79,17 @@ class RowErrors:
 
 
 def channel_noise(df) -> dict:
-    """{channel: white-noise sd} of one record's probed channels (``state_estimation.noise_std``)."""
+    """{channel: white-noise sd} of one record's probed channels
+    (``state_estimation.noise_std``)."""
     from study.records.state_estimation import noise_std
 
     return {c: float(noise_std(df[c].to_numpy())) for c in PROBED_CHANNELS if c in df.columns}
 
 
 def noisy_copies(records: list, n_probes: int, seed: int) -> tuple[list, Iterator[list]]:
-    """(per record its channel noise levels, a generator of ``n_probes`` copies of ``records``, each with fresh
-    white noise at those levels added to the probed channels). Deterministic in ``seed``."""
+    """(per record its channel noise levels, a generator of ``n_probes`` copies of ``records``,
+    each with fresh white noise at those levels added to the probed channels). Deterministic in
+    ``seed``."""
     frames = [rec.data if hasattr(rec, "data") else rec for rec in records]
     sds = [channel_noise(df) for df in frames]
 
@@ -97,8 +104,8 @@ def noisy_copies(records: list, n_probes: int, seed: int) -> tuple[list, Iterato
 
 @dataclass
 class Correction:
-    """The errors-in-variables terms of the whitened rows: ``M`` (k x k) and ``g`` (k), means over the probes, and
-    the per-probe values to measure their Monte Carlo error."""
+    """The errors-in-variables terms of the whitened rows: ``M`` (k x k) and ``g`` (k), means
+    over the probes, and the per-probe values to measure their Monte Carlo error."""
 
     M: np.ndarray
     g: np.ndarray
@@ -114,11 +121,12 @@ class Correction:
 
 def eiv_terms(errors: RowErrors, whiten: Callable[[np.ndarray], np.ndarray],
               exact: np.ndarray | None = None) -> Correction | None:
-    """``M = E[N_w' N_w]``, ``g = E[N_w' eps_w]`` over the probes, ``N_w`` the whitened change of the rows.
-    ``exact``: whitened columns without noise fitted beside the regressors (diff_center's intercept): the noise
-    along them is absorbed by them in the fit, so it is projected out of ``N_w`` and ``eps_w`` first (corrected
-    least squares on the partialled rows, Frisch-Waugh); ``M`` and ``g`` get zero rows for them. Why: whitening
-    differenced rows integrates their noise, whose largest part is then a trend the intercept takes up; left in,
+    """``M = E[N_w' N_w]``, ``g = E[N_w' eps_w]`` over the probes, ``N_w`` the whitened change of
+    the rows. ``exact``: whitened columns without noise fitted beside the regressors
+    (diff_center's intercept): the noise along them is absorbed by them in the fit, so it is
+    projected out of ``N_w`` and ``eps_w`` first (corrected least squares on the partialled rows,
+    Frisch-Waugh); ``M`` and ``g`` get zero rows for them. Why: whitening differenced rows
+    integrates their noise, whose largest part is then a trend the intercept takes up; left in,
     it over-corrected diff_center by tens of posterior sd."""
     if errors is None or errors.probes is None:
         return None

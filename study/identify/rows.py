@@ -1,11 +1,13 @@
-"""The regression rows of a run: a model's equation-error rows built from records by a sample structure, processed
-(differenced, cleaned, split) into each equation's training rows, with their noise operators and their errors.
+"""The regression rows of a run: a model's equation-error rows built from records by a sample
+structure, processed (differenced, cleaned, split) into each equation's training rows, with their
+noise operators and their errors.
 
-:func:`regression_rows` stacks the rows of every segment of every record; :func:`prepare` takes them through the
-structure's processing into one :class:`Prepared` regression per equation (``study.identify.fit`` fits it);
-:func:`term_scales` weighs each term in its equation; :func:`truncation_rows` and :func:`row_errors` give the rows'
-truncation errors and regressor-noise probes that emcee's regression likelihood removes; :func:`build` stacks the
-bare rows of a model config (for tests and notebooks).
+:func:`regression_rows` stacks the rows of every segment of every record; :func:`prepare` takes them
+through the structure's processing into one :class:`Prepared` regression per equation
+(``study.identify.fit`` fits it); :func:`term_scales` weighs each term in its equation;
+:func:`truncation_rows` and :func:`row_errors` give the rows' truncation errors and regressor-noise
+probes that emcee's regression likelihood removes; :func:`build` stacks the bare rows of a model
+config (for tests and notebooks).
 """
 from __future__ import annotations
 
@@ -23,9 +25,9 @@ CANDIDATE_R2_GAP = 1e-3
 
 
 def regression_rows(model, structure, records, candidates: int | None = None):
-    """Per equation ``(Phi, y, segment id)`` stacked over every segment of every record, before the structure's
-    post-processing; with ``candidates`` (a degree) the model's extra candidate columns are appended (their
-    names in ``model.candidate_names_``)."""
+    """Per equation ``(Phi, y, segment id)`` stacked over every segment of every record, before
+    the structure's post-processing; with ``candidates`` (a degree) the model's extra candidate
+    columns are appended (their names in ``model.candidate_names_``)."""
     acc: dict = {}
     cand_names = None
     sid = 0
@@ -48,9 +50,10 @@ def regression_rows(model, structure, records, candidates: int | None = None):
 
 
 def noise_operators(model, structure, records) -> list | None:
-    """The structure's noise operators (:meth:`Structure.noise_operators`) of every segment of every record, in
-    the order of :func:`regression_rows`, block-diagonal over segments: sparse (built rows x all nodes). None when
-    the structure has none (its rows are no fixed linear stencil of the samples)."""
+    """The structure's noise operators (:meth:`Structure.noise_operators`) of every segment of
+    every record, in the order of :func:`regression_rows`, block-diagonal over segments: sparse
+    (built rows x all nodes). None when the structure has none (its rows are no fixed linear
+    stencil of the samples)."""
     import scipy.sparse as sp
 
     blocks = []
@@ -67,10 +70,11 @@ def noise_operators(model, structure, records) -> list | None:
 
 
 def _drop_duplicate_candidates(Phi: np.ndarray, n_model: int, names: list) -> tuple[np.ndarray, list]:
-    """Drop candidate columns (after the first ``n_model``) that the columns kept so far explain to
-    ``R^2 > 1 - CANDIDATE_R2_GAP`` by least squares: such a term cannot be told from the model's own terms
-    (e.g. the AUV's u v and the candidate (U/U0)^2 v' = U v / U0^2 differ only through the small drift), and a
-    sparse regression would split the coefficient between the two arbitrarily."""
+    """Drop candidate columns (after the first ``n_model``) that the columns kept so far explain
+    to ``R^2 > 1 - CANDIDATE_R2_GAP`` by least squares: such a term cannot be told from the
+    model's own terms (e.g. the AUV's u v and the candidate (U/U0)^2 v' = U v / U0^2 differ only
+    through the small drift), and a sparse regression would split the coefficient between the two
+    arbitrarily."""
     keep = list(range(n_model))
     for j in range(n_model, Phi.shape[1]):
         c = Phi[:, j]
@@ -86,9 +90,9 @@ def _drop_duplicate_candidates(Phi: np.ndarray, n_model: int, names: list) -> tu
 
 @dataclass
 class Prepared:
-    """One equation's regression after the structure's processing: training rows ``X`` (DataFrame, columns =
-    model terms then candidate terms), ``y``; held-out rows; the processing report; multicollinearity of the
-    model terms."""
+    """One equation's regression after the structure's processing: training rows ``X``
+    (DataFrame, columns = model terms then candidate terms), ``y``; held-out rows; the processing
+    report; multicollinearity of the model terms."""
 
     X: pd.DataFrame
     y: np.ndarray
@@ -103,13 +107,15 @@ class Prepared:
 
 
 def term_scales(model, records, rows: dict | None = None) -> dict:
-    """Each model term's weight in its equation: the RMS of the term's regressor over the RMS of the equation's
-    left-hand side, on central-difference rows of the training records. The same rows serve every structure and
-    estimator of a dataset, so scaled errors of two structures compare. ``|estimate - truth| * scale`` is the
-    error's contribution to the equation in units of the equation's own size: a coefficient near zero whose term
-    hardly acts no longer dominates a median of relative errors, and a zero truth gets a finite figure. Empty for
-    models whose reported parameters are not regression columns (Nomoto's K, T, ...) or rows that cannot be made.
-    ``rows``: those central-difference rows when the caller has built them already (:func:`regression_rows`)."""
+    """Each model term's weight in its equation: the RMS of the term's regressor over the RMS of
+    the equation's left-hand side, on central-difference rows of the training records. The same
+    rows serve every structure and estimator of a dataset, so scaled errors of two structures
+    compare. ``|estimate - truth| * scale`` is the error's contribution to the equation in units
+    of the equation's own size: a coefficient near zero whose term hardly acts no longer
+    dominates a median of relative errors, and a zero truth gets a finite figure. Empty for
+    models whose reported parameters are not regression columns (Nomoto's K, T, ...) or rows that
+    cannot be made. ``rows``: those central-difference rows when the caller has built them
+    already (:func:`regression_rows`)."""
     if getattr(model, "type", None) == "nomoto":
         return {}
     if rows is None:
@@ -134,16 +140,17 @@ def _central():
 
 
 def same_rows_as_central(structure, candidates) -> bool:
-    """Whether ``structure`` builds the rows :func:`term_scales` needs (central differences, no candidates):
-    its clean-up and split act only after the rows are built."""
+    """Whether ``structure`` builds the rows :func:`term_scales` needs (central differences, no
+    candidates): its clean-up and split act only after the rows are built."""
     return not candidates and structure.name == "central" and type(structure) is type(_central())
 
 
 def prepare(model, structure, records, candidates: int | None = None, seed: int = 0,
             operators: bool = False, rows: dict | None = None) -> dict:
-    """Per equation the :class:`Prepared` regression of ``model`` on ``records`` with ``structure``; with
-    ``operators`` also the training rows' noise operators (:func:`noise_operators` through the post-processing's
-    row map, as a :class:`study.identify.row_noise.RowOperators`; None when the structure has none). ``rows``:
+    """Per equation the :class:`Prepared` regression of ``model`` on ``records`` with
+    ``structure``; with ``operators`` also the training rows' noise operators
+    (:func:`noise_operators` through the post-processing's row map, as a
+    :class:`study.identify.row_noise.RowOperators`; None when the structure has none). ``rows``:
     the structure's rows when the caller has built them already (:func:`regression_rows`)."""
     from .row_noise import RowOperators
 
@@ -172,7 +179,8 @@ def prepare(model, structure, records, candidates: int | None = None, seed: int 
 
 @dataclass
 class Regression:
-    """Per equation: regressor matrix, target, column names, truth values (when the columns are parameters)."""
+    """Per equation: regressor matrix, target, column names, truth values (when the columns are
+    parameters)."""
 
     Phi: dict
     y: dict
@@ -182,9 +190,11 @@ class Regression:
 
 
 def build(vessel, model, records, structure) -> Regression:
-    """Stack the (unprocessed) regression rows of every record for a model config and a structure name.
+    """Stack the (unprocessed) regression rows of every record for a model config and a structure
+    name.
 
-    A convenience for tests and notebooks; the study's runs go through ``study.identify.fit.identify``.
+    A convenience for tests and notebooks; the study's runs go through
+    ``study.identify.fit.identify``.
     """
     from .models import make_model
     from .structures import make_structure
@@ -205,9 +215,9 @@ def build(vessel, model, records, structure) -> Regression:
 
 
 def truncation_rows(model, structure, records) -> dict:
-    """Per equation ``(y_t, Phi_t)``: the truncation errors of the built rows' target and regressors
-    (``study.identify.truncation``), in the order of :func:`regression_rows`; empty where the structure has no
-    fixed stencil (the RTS smoother's states, r from the heading)."""
+    """Per equation ``(y_t, Phi_t)``: the truncation errors of the built rows' target and
+    regressors (``study.identify.truncation``), in the order of :func:`regression_rows`; empty
+    where the structure has no fixed stencil (the RTS smoother's states, r from the heading)."""
     from .truncation import TruncationStructure
 
     try:
@@ -219,11 +229,12 @@ def truncation_rows(model, structure, records) -> dict:
 
 def row_errors(model, structure, records, prepared: dict, trunc_rows: dict | None = None, seed: int = 0,
                n_probes: int | None = None) -> dict:
-    """Per equation the :class:`study.identify.row_errors.RowErrors` of its training rows: their truncation errors
-    (:func:`truncation_rows` through the row map) and the probes of the regressors' noise (the records with fresh
-    noise at each channel's estimated level, built into rows like the records and taken through the same row map;
-    centred like the rows where the structure centres). ``n_probes``: None ``row_errors.N_PROBES``, 0 no probes
-    (noise-free records). Each probe's rows are built once for every equation."""
+    """Per equation the :class:`study.identify.row_errors.RowErrors` of its training rows: their
+    truncation errors (:func:`truncation_rows` through the row map) and the probes of the
+    regressors' noise (the records with fresh noise at each channel's estimated level, built into
+    rows like the records and taken through the same row map; centred like the rows where the
+    structure centres). ``n_probes``: None ``row_errors.N_PROBES``, 0 no probes (noise-free
+    records). Each probe's rows are built once for every equation."""
     from .row_errors import N_PROBES, RowErrors, noisy_copies
 
     n_probes = N_PROBES if n_probes is None else int(n_probes)

@@ -1,39 +1,43 @@
-"""Sample structures: how measured records become the rows of a regression (or, for ``output_error``, how a
-model is compared with the records by simulating it).
+"""Sample structures: how measured records become the rows of a regression (or, for
+``output_error``, how a model is compared with the records by simulating it).
 
-A record is first cut into *segments* at its gaps (a time step above 1.5 times the median: dropouts), so
-records with missing samples stay usable. On one segment a structure gives the *operators* a model builds its
-rows from (``Ops``): ``value(F)`` (a node-wise quantity at the rows: the regressors) and ``d(X, p)`` (the p-th
-time derivative of a measured signal at the rows: the targets). A model equation ``D^p x = sum_i theta_i f_i``
-becomes the rows ``d(x, p) = sum_i theta_i value(f_i(nodes))``:
+A record is first cut into *segments* at its gaps (a time step above 1.5 times the median:
+dropouts), so records with missing samples stay usable. On one segment a structure gives the
+*operators* a model builds its rows from (``Ops``): ``value(F)`` (a node-wise quantity at the rows:
+the regressors) and ``d(X, p)`` (the p-th time derivative of a measured signal at the rows: the
+targets). A model equation ``D^p x = sum_i theta_i f_i`` becomes the rows ``d(x, p) = sum_i theta_i
+value(f_i(nodes))``:
 
 - ``euler``: forward differences, state at k (Song et al. 2025, eq. 14); O(h) truncation error.
 - ``central``: central differences, state at k (Zheng & Xiao 2017, eqs. 14-17); O(h^2). Written for
   a non-uniform grid (the three-point formulas), so jittered time stamps stay exact to O(h^2).
 - ``integral``: the equation integrated over each sample interval by the trapezoidal rule: value =
   (f_k + f_k+1)/2, d(x, 1) = (x_k+1 - x_k)/h (Du et al. 2016, Sec. 3.2: inputs x_k + x_k+1, output
-  x_k+1 - x_k; the same rows divided by h so the coefficients keep their units). This is also the weak form of
-  SINDy with box test functions (Messenger & Bortz 2021). A second-order equation (Nomoto 2) is integrated
-  against a hat function over two intervals instead, so that again no derivative of the data is taken.
-- ``smoothed``: Savitzky-Golay (Savitzky & Golay 1964; ``scipy.signal.savgol_filter``): the regressors are
-  evaluated on the smoothed states, the derivatives are the filter's derivatives of the raw signals; the half
-  window at each end is dropped (the end fits are one-sided). With ``smoothing.method: rts`` the states
-  ``u, v, r`` and their derivatives come instead from an extended Kalman filter with a Rauch-Tung-Striebel
-  smoother over the segment's positions, heading and measured ``u, v, r``
-  (``study.records.state_estimation``; options under ``smoothing.rts``); every other signal (rudder,
-  propeller, wind...) is smoothed and differentiated by Savitzky-Golay as before, and the same rows are kept
-  (the half window at each end dropped), so the two methods differ only in the states.
+  x_k+1 - x_k; the same rows divided by h so the coefficients keep their units). This is also the
+  weak form of SINDy with box test functions (Messenger & Bortz 2021). A second-order equation
+  (Nomoto 2) is integrated against a hat function over two intervals instead, so that again no
+  derivative of the data is taken.
+- ``smoothed``: Savitzky-Golay (Savitzky & Golay 1964; ``scipy.signal.savgol_filter``): the
+  regressors are evaluated on the smoothed states, the derivatives are the filter's derivatives of
+  the raw signals; the half window at each end is dropped (the end fits are one-sided). With
+  ``smoothing.method: rts`` the states ``u, v, r`` and their derivatives come instead from an
+  extended Kalman filter with a Rauch-Tung-Striebel smoother over the segment's positions, heading
+  and measured ``u, v, r`` (``study.records.state_estimation``; options under ``smoothing.rts``);
+  every other signal (rudder, propeller, wind...) is smoothed and differentiated by Savitzky-Golay
+  as before, and the same rows are kept (the half window at each end dropped), so the two methods
+  differ only in the states.
 - ``diff_center``: a base structure (``euler`` as in Song et al. (2025)), then its rows differenced,
-  y_k - rho y_k-1 = (phi_k - rho phi_k-1) theta (Song et al. (2025) eqs. 15-17, rho = 1), then centred (eq. 18: every
-  column minus its mean over the training rows).
-- ``output_error``: no rows; the model is simulated through the records with their measured inputs (Zheng & Xiao's (2017)
-  "integral" method; see ``study.identify.output_error``). Only estimators that simulate can use it.
+  y_k - rho y_k-1 = (phi_k - rho phi_k-1) theta (Song et al. (2025) eqs. 15-17, rho = 1), then
+  centred (eq. 18: every column minus its mean over the training rows).
+- ``output_error``: no rows; the model is simulated through the records with their measured inputs
+  (Zheng & Xiao's (2017) "integral" method; see ``study.identify.output_error``). Only estimators
+  that simulate can use it.
 
-Every regression structure takes the seed-000 cleaning steps (eqs. 4-9), each selectable in its config
-(``clean:``): non-finite rows dropped, rows with a z-score above a limit in any column dropped, duplicated rows
-dropped, rows whose target is smaller than a threshold dropped, and a train/test split of the rows
-(``split:``); ``select: {n_rows: k}`` keeps k evenly spaced training rows (Du et al. (2016) uses 100 of 600). They act
-per equation on that equation's rows.
+Every regression structure takes the seed-000 cleaning steps (eqs. 4-9), each selectable in its
+config (``clean:``): non-finite rows dropped, rows with a z-score above a limit in any column
+dropped, duplicated rows dropped, rows whose target is smaller than a threshold dropped, and a
+train/test split of the rows (``split:``); ``select: {n_rows: k}`` keeps k evenly spaced training
+rows (Du et al. (2016) uses 100 of 600). They act per equation on that equation's rows.
 """
 from __future__ import annotations
 
@@ -106,7 +110,8 @@ def _h(t):
 
 
 def _d1_nodes(X: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """First derivative at the interior nodes 1..n-2 by the three-point formula on a non-uniform grid."""
+    """First derivative at the interior nodes 1..n-2 by the three-point formula on a non-uniform
+    grid."""
     h1 = (t[1:-1] - t[:-2]).reshape((-1,) + (1,) * (X.ndim - 1))
     h2 = (t[2:] - t[1:-1]).reshape(h1.shape)
     return (h1 * h1 * X[2:] - h2 * h2 * X[:-2] - (h1 * h1 - h2 * h2) * X[1:-1]) / (h1 * h2 * (h1 + h2))
@@ -158,12 +163,13 @@ class CentralOps(Ops):
 
 
 class IntegralOps(Ops):
-    """Rows = the equation integrated against a test function, so that no derivative of a measured signal is
-    taken. Order 1: a box over [t_k, t_k+1] (Du et al.'s (2016) trapezoidal rows). Order 2: a hat over
-    [t_k-1, t_k+1] (peak 1 at t_k); integrating by parts puts both derivatives on the hat,
-    int(hat x'') = x_k+1/h2 - x_k (1/h1 + 1/h2) + x_k-1/h1, and int(hat f) is exact for piecewise-linear f:
-    (h1 f_k-1 + 2 (h1 + h2) f_k + h2 f_k+1) / 6. Rows are divided by the test function's integral, so the
-    coefficients keep their units (the weak form of Messenger & Bortz 2021 with the simplest test functions).
+    """Rows = the equation integrated against a test function, so that no derivative of a measured
+    signal is taken. Order 1: a box over [t_k, t_k+1] (Du et al.'s (2016) trapezoidal rows). Order
+    2: a hat over [t_k-1, t_k+1] (peak 1 at t_k); integrating by parts puts both derivatives on the
+    hat, int(hat x'') = x_k+1/h2 - x_k (1/h1 + 1/h2) + x_k-1/h1, and int(hat f) is exact for
+    piecewise-linear f: (h1 f_k-1 + 2 (h1 + h2) f_k + h2 f_k+1) / 6. Rows are divided by the test
+    function's integral, so the coefficients keep their units (the weak form of Messenger & Bortz
+    2021 with the simplest test functions).
     """
 
     def __init__(self, t, order):
@@ -228,12 +234,13 @@ class SavGolOps(Ops):
 
 
 class RtsOps(SavGolOps):
-    """Savitzky-Golay rows whose derivatives of the measured ``u, v, r`` are the RTS smoother's ``u_dot, v_dot,
-    r_dot`` (``smoothing.method: rts``). A column of ``X`` is recognised as one of the segment's measured
-    ``u, v, r`` by its values; any other signal (rudder, propeller, or a column an effect has transformed, such
-    as the doctor's water-relative velocities) is differentiated by Savitzky-Golay as in :class:`SavGolOps`.
-    A second derivative is the Savitzky-Golay first derivative of the smoother's (smooth) first derivative.
-    ``raw``: the measured ``u, v, r`` the smoother used; ``est``: its states and derivatives."""
+    """Savitzky-Golay rows whose derivatives of the measured ``u, v, r`` are the RTS smoother's
+    ``u_dot, v_dot, r_dot`` (``smoothing.method: rts``). A column of ``X`` is recognised as one
+    of the segment's measured ``u, v, r`` by its values; any other signal (rudder, propeller, or
+    a column an effect has transformed, such as the doctor's water-relative velocities) is
+    differentiated by Savitzky-Golay as in :class:`SavGolOps`. A second derivative is the
+    Savitzky-Golay first derivative of the smoother's (smooth) first derivative. ``raw``: the
+    measured ``u, v, r`` the smoother used; ``est``: its states and derivatives."""
 
     def __init__(self, t, window: int, polyorder: int, raw: dict, est: dict):
         super().__init__(t, window, polyorder)
@@ -275,9 +282,10 @@ def _savgol_coeffs(window: int, polyorder: int, deriv: int, delta: float) -> np.
 
 
 def savgol_interior(X: np.ndarray, window: int, polyorder: int, deriv: int = 0, delta: float = 1.0) -> np.ndarray:
-    """``scipy.signal.savgol_filter`` along axis 0, exact at the interior nodes (the rows): the same coefficients
-    and convolution, but the coefficients cached and the edges by the "nearest" mode instead of "interp"'s
-    polynomial fits, which no row uses (measured: most of the model doctor's smoothing time)."""
+    """``scipy.signal.savgol_filter`` along axis 0, exact at the interior nodes (the rows): the
+    same coefficients and convolution, but the coefficients cached and the edges by the "nearest"
+    mode instead of "interp"'s polynomial fits, which no row uses (measured: most of the model
+    doctor's smoothing time)."""
     from scipy.ndimage import convolve1d
 
     return convolve1d(X, _savgol_coeffs(int(window), int(polyorder), int(deriv), float(delta)), axis=0,
@@ -311,11 +319,12 @@ class Structure:
         return str((self.smoothing or {}).get("method") or "savgol")
 
     def rts_states(self, seg: Segment) -> tuple[dict, dict] | None:
-        """``(inputs, states)`` of a segment: the measured ``u, v, r`` the estimate used, and ``u, v, r, u_dot,
-        v_dot, r_dot`` from the EKF + RTS smoother (``smoothing.rts`` options). Cached on the segment's times,
-        positions and heading, so that a segment whose ``u, v`` an effect has changed (the doctor's
-        water-relative velocities) reuses the estimate of the measured one; None when the segment has no
-        positions and heading (a partial segment of changed columns: smoothed by Savitzky-Golay)."""
+        """``(inputs, states)`` of a segment: the measured ``u, v, r`` the estimate used, and
+        ``u, v, r, u_dot, v_dot, r_dot`` from the EKF + RTS smoother (``smoothing.rts`` options).
+        Cached on the segment's times, positions and heading, so that a segment whose ``u, v`` an
+        effect has changed (the doctor's water-relative velocities) reuses the estimate of the
+        measured one; None when the segment has no positions and heading (a partial segment of
+        changed columns: smoothed by Savitzky-Golay)."""
         need = ("x0", "y0", "psi")
         if not all(c in seg.data for c in need):
             return None
@@ -374,8 +383,9 @@ class Structure:
         raise ValueError(f"structure '{self.name}' ({self.kind}) builds no regression rows")
 
     def measured(self, seg: Segment) -> Segment:
-        """The segment as the rows see it: with ``rate_from_heading`` the yaw rate is the three-point central
-        difference of the heading (Zheng & Xiao (2017) eq. 14: r, r', r'' all from psi, as when no gyro is logged)."""
+        """The segment as the rows see it: with ``rate_from_heading`` the yaw rate is the
+        three-point central difference of the heading (Zheng & Xiao (2017) eq. 14: r, r', r'' all
+        from psi, as when no gyro is logged)."""
         if not self.rate_from_heading:
             return seg
         data = dict(seg.data)
@@ -403,17 +413,19 @@ class Structure:
         return out
 
     def noise_operators(self, seg: Segment, order: int) -> list | None:
-        """How white noise on the segment's samples reaches its rows: ``[D_order, ..., D_1, V]``, sparse (rows x
-        nodes) matrices, ``D_p`` the structure's p-th derivative operator and ``V`` its value operator (after the
-        smoothing of :meth:`nodes`). A row's noise is ``D_order w_a + ... + V w_b`` for node-wise noises
-        ``w`` (the target's derivative of the measured signal, the regressors' values); the regression likelihood
-        of ``estimator=emcee`` models its covariance with them (``study.identify.row_noise``).
+        """How white noise on the segment's samples reaches its rows: ``[D_order, ..., D_1, V]``,
+        sparse (rows x nodes) matrices, ``D_p`` the structure's p-th derivative operator and ``V``
+        its value operator (after the smoothing of :meth:`nodes`). A row's noise is ``D_order w_a +
+        ... + V w_b`` for node-wise noises ``w`` (the target's derivative of the measured signal,
+        the regressors' values); the regression likelihood of ``estimator=emcee`` models its
+        covariance with them (``study.identify.row_noise``).
 
-        Read off the structure's own operators by applying them to comb signals (1 on every C-th node, C wider
-        than any stencil: the grouping of Curtis, Powell & Reid 1974 for sparse Jacobians), so each structure
-        gives its own stencils and a change to an operator changes its noise model with it; checked on a random
-        signal. None where the rows are no fixed linear stencil of the samples: the RTS smoother's states, and
-        ``rate_from_heading`` (r is itself a difference of psi, and the other channels are not).
+        Read off the structure's own operators by applying them to comb signals (1 on every C-th
+        node, C wider than any stencil: the grouping of Curtis, Powell & Reid 1974 for sparse
+        Jacobians), so each structure gives its own stencils and a change to an operator changes its
+        noise model with it; checked on a random signal. None where the rows are no fixed linear
+        stencil of the samples: the RTS smoother's states, and ``rate_from_heading`` (r is itself a
+        difference of psi, and the other channels are not).
         """
         if self.rate_from_heading or (self.kind == "smoothed" and self.method == "rts"):
             return None
@@ -452,10 +464,11 @@ class Structure:
 
     # -- rows after the model built them (per equation)
     def postprocess(self, Phi: np.ndarray, y: np.ndarray, seg_id: np.ndarray, seed: int = 0):
-        """Differencing, cleaning, split and centring (each as configured). Returns a dict of arrays:
-        ``Phi, y`` (training rows), ``Phi_test, y_test`` (held-out rows, maybe empty), ``report`` (counts), and
-        ``rows``: the sparse (training rows x built rows) map of the differencing, cleaning, split and selection
-        (training rows before centring = ``rows @ built rows``), which carries the built rows' noise model over."""
+        """Differencing, cleaning, split and centring (each as configured). Returns a dict of
+        arrays: ``Phi, y`` (training rows), ``Phi_test, y_test`` (held-out rows, maybe empty),
+        ``report`` (counts), and ``rows``: the sparse (training rows x built rows) map of the
+        differencing, cleaning, split and selection (training rows before centring = ``rows @
+        built rows``), which carries the built rows' noise model over."""
         report = {"rows_built": int(len(y))}
         rows = sp.identity(len(y), format="csr")
         if self.difference:

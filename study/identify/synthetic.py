@@ -1,13 +1,14 @@
-"""Synthetic, manoeuvre-like regressor matrices with a known truth: the shared test data of the estimator
-tests (tests/identify/test_estimators.py) and benchmark (benchmarks/bench_estimators_synthetic.py)."""
+"""Synthetic, manoeuvre-like regressor matrices with a known truth: the shared test data of the
+estimator tests (tests/identify/test_estimators.py) and benchmark
+(benchmarks/bench_estimators_synthetic.py)."""
 from __future__ import annotations
 
 import numpy as np
 
 
 def manoeuvre_regressors(n=2000, k=5, seed=0, duration=1680.0, extra=0):
-    """(X, theta): k manoeuvre-like columns scaled over 1e-3..1e2 (columns 0, 1 correlated 0.99), plus
-    ``extra`` irrelevant smooth columns (true coefficient 0, appended last)."""
+    """(X, theta): k manoeuvre-like columns scaled over 1e-3..1e2 (columns 0, 1 correlated 0.99),
+    plus ``extra`` irrelevant smooth columns (true coefficient 0, appended last)."""
     rng = np.random.default_rng(seed)
     t = np.linspace(0.0, duration, n, endpoint=False)
 

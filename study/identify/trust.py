@@ -1,44 +1,50 @@
-"""Can an emcee regression run's intervals be trusted? The verdict, from the run's own records only (never from the
-truth), that the run reports as ``intervals_trusted`` with a one-line ``intervals_note``.
+"""Can an emcee regression run's intervals be trusted? The verdict, from the run's own records only
+(never from the truth), that the run reports as ``intervals_trusted`` with a one-line
+``intervals_note``.
 
 Only emcee's regression likelihood has intervals meant to cover the truth, so only it asks (its
-:meth:`~study.identify.estimators.bayes.EmceeSampler.trust_verdict`); keeping the verdict here, apart from the
-identification engine, means changing it changes the code fingerprint of emcee's runs only. The checks, in order:
+:meth:`~study.identify.estimators.bayes.EmceeSampler.trust_verdict`); keeping the verdict here,
+apart from the identification engine, means changing it changes the code fingerprint of emcee's runs
+only. The checks, in order:
 
-1. **The likelihood's own assumptions**: the independent-rows likelihood (``regression_iid``) is never calibrated;
-   rows differenced and then cut (``diff_center``'s split, z-score cleaning) leave gaps the whitening cannot undo;
-   the regressors' noise too large for a first-order removal (``study.identify.row_errors``).
-2. **The records carry measurement noise**: a regression whose rows fit to within :data:`NOISE_FREE_GAP` of their
-   variance (1 - R^2) in any equation has no noise the likelihood could model (noise-free simulated records): its
-   residual is the simulation's and the structure's numerical error, and its intervals would measure that.
-3. **The residual is the noise the likelihood models**: whitened by the fitted row-noise model, the rows' residual
-   of a well-specified regression is white; a lag-1 or lag-2 autocorrelation beyond :data:`ACF_LIMIT` in any
-   equation says the rows' errors are something else (no measurement noise at all, coloured noise, a term the
-   model lacks), which the intervals do not cover.
-4. **The structure's truncation** (``study.identify.truncation``): its estimated bias of each reported parameter, in
-   posterior sd, against :data:`BIAS_LIMIT_SD`, or, where the likelihood removed it, against
+1. **The likelihood's own assumptions**: the independent-rows likelihood (``regression_iid``) is
+   never calibrated; rows differenced and then cut (``diff_center``'s split, z-score cleaning) leave
+   gaps the whitening cannot undo; the regressors' noise too large for a first-order removal
+   (``study.identify.row_errors``).
+2. **The records carry measurement noise**: a regression whose rows fit to within
+   :data:`NOISE_FREE_GAP` of their variance (1 - R^2) in any equation has no noise the likelihood
+   could model (noise-free simulated records): its residual is the simulation's and the structure's
+   numerical error, and its intervals would measure that.
+3. **The residual is the noise the likelihood models**: whitened by the fitted row-noise model, the
+   rows' residual of a well-specified regression is white; a lag-1 or lag-2 autocorrelation beyond
+   :data:`ACF_LIMIT` in any equation says the rows' errors are something else (no measurement noise
+   at all, coloured noise, a term the model lacks), which the intervals do not cover.
+4. **The structure's truncation** (``study.identify.truncation``): its estimated bias of each
+   reported parameter, in posterior sd, against :data:`BIAS_LIMIT_SD`, or, where the likelihood
+   removed it, against
    :data:`CORRECTED_LIMIT_SD`.
-5. **The same coefficients everywhere in the records** (:func:`heterogeneity`): the whitened rows split into four
-   groups by where they lie in the records' range (:func:`range_key`: the size of the fitted value of their
-   neighbours), the coefficients fitted on each group apart. For a model that holds they
-   agree within their own spread; a term the model lacks that its other terms nearly absorb leaves the residual
-   white but is absorbed differently where the states are small and where they are large, so the groups'
-   coefficients disagree (a Chow (1960) test across the regressors' range rather than across time): their
-   chi-square's upper tail against :data:`HETEROGENEITY_P`.
-6. **No neighbouring term the records ask for** (:func:`omitted_terms`): the model's own states' monomials up to
-   :data:`NEIGHBOUR_DEGREE` that it lacks (``Model.candidates``, built by the same structure on the same rows),
-   added to the whitened rows together; a robust Wald test of their coefficients (the score test for omitted
-   variables, e.g. Wooldridge 2010, *Econometric Analysis of Cross Section and Panel Data*, 2nd ed., sec. 12.6),
-   its upper tail against :data:`OMITTED_TERMS_P`. A missing term the others absorb alike over the whole range
-   escapes check 5 but not this one when it is, or resembles, a monomial of the states.
+5. **The same coefficients everywhere in the records** (:func:`heterogeneity`): the whitened rows
+   split into four groups by where they lie in the records' range (:func:`range_key`: the size of
+   the fitted value of their neighbours), the coefficients fitted on each group apart. For a model
+   that holds they agree within their own spread; a term the model lacks that its other terms nearly
+   absorb leaves the residual white but is absorbed differently where the states are small and where
+   they are large, so the groups' coefficients disagree (a Chow (1960) test across the regressors'
+   range rather than across time): their chi-square's upper tail against :data:`HETEROGENEITY_P`.
+6. **No neighbouring term the records ask for** (:func:`omitted_terms`): the model's own states'
+   monomials up to :data:`NEIGHBOUR_DEGREE` that it lacks (``Model.candidates``, built by the same
+   structure on the same rows), added to the whitened rows together; a robust Wald test of their
+   coefficients (the score test for omitted variables, e.g. Wooldridge 2010, *Econometric Analysis
+   of Cross Section and Panel Data*, 2nd ed., sec. 12.6), its upper tail against
+   :data:`OMITTED_TERMS_P`. A missing term the others absorb alike over the whole range escapes
+   check 5 but not this one when it is, or resembles, a monomial of the states.
 
 The truncation limits' reasons are in :mod:`study.identify.truncation`'s docstring.
 
-What the verdict still cannot see: a missing term unlike any monomial of the states and absorbed the same way over
-the whole range of the records (the groups agree while every coefficient is biased), and errors the records share
-(a sensor's bias, the facility).
-"Trusted" means trusted for the model as given: the intervals cover the identification spread, and the check above
-catches a missing term only where the records show it.
+What the verdict still cannot see: a missing term unlike any monomial of the states and absorbed the
+same way over the whole range of the records (the groups agree while every coefficient is biased),
+and errors the records share (a sensor's bias, the facility). "Trusted" means trusted for the model
+as given: the intervals cover the identification spread, and the check above catches a missing term
+only where the records show it.
 """
 from __future__ import annotations
 
@@ -99,10 +105,11 @@ CORRECTED_LIMIT_SD = 20.0
 
 def verdict(bias_sd: dict, structure_name: str, dropped_differences: int = 0, corrected: bool = False,
             reliability: float | None = None, eiv_refused: bool = False) -> tuple[bool, str]:
-    """(trusted, one-line note) from the reported parameters' estimated truncation biases in posterior sd, the
-    rows differenced then cut, and, where the likelihood removed the rows' errors (``corrected``,
-    ``study.identify.row_errors``), whether it had to leave the regressors' noise in (``eiv_refused``: their
-    smallest whitened ``reliability`` below ``row_errors.RELIABILITY_MIN``; see the module docstring)."""
+    """(trusted, one-line note) from the reported parameters' estimated truncation biases in
+    posterior sd, the rows differenced then cut, and, where the likelihood removed the rows'
+    errors (``corrected``, ``study.identify.row_errors``), whether it had to leave the
+    regressors' noise in (``eiv_refused``: their smallest whitened ``reliability`` below
+    ``row_errors.RELIABILITY_MIN``; see the module docstring)."""
     if dropped_differences:
         return False, (f"{structure_name}: {dropped_differences} differenced rows dropped (split/cleaning) leave "
                        "gaps, so the differencing cannot be undone and the regressors' noise biases the estimate: "
@@ -130,14 +137,16 @@ def verdict(bias_sd: dict, structure_name: str, dropped_differences: int = 0, co
 
 
 def range_key(fitted: np.ndarray, shared: int, rows: int = RANGE_KEY_ROWS) -> np.ndarray:
-    """Where each row lies in the records' range, for :func:`heterogeneity`: the mean |fitted value| of the ``rows``
-    rows on each side of it beyond the ``shared`` nearest (fewer at the ends of the rows).
+    """Where each row lies in the records' range, for :func:`heterogeneity`: the mean |fitted value|
+    of the ``rows`` rows on each side of it beyond the ``shared`` nearest (fewer at the ends of the
+    rows).
 
-    ``shared`` is how far a row's noise reaches: the row-noise model's bandwidth plus one, since a row's
-    regressors may hold the samples its neighbours' responses hold. A row's own fitted value carries its own
-    noise, and the integral structure's rows share that noise with their response (both hold the samples at the
-    window's two ends): groups sorted by it are selected on their noise, and their fits disagree where the model
-    holds. The neighbours' values lie in the same part of the range but carry none of the row's noise."""
+    ``shared`` is how far a row's noise reaches: the row-noise model's bandwidth plus one, since
+    a row's regressors may hold the samples its neighbours' responses hold. A row's own fitted
+    value carries its own noise, and the integral structure's rows share that noise with their
+    response (both hold the samples at the window's two ends): groups sorted by it are selected
+    on their noise, and their fits disagree where the model holds. The neighbours' values lie in
+    the same part of the range but carry none of the row's noise."""
     f = np.abs(np.asarray(fitted, float))
     n = len(f)
     cum = np.concatenate([[0.0], np.cumsum(f)])
@@ -151,12 +160,13 @@ def range_key(fitted: np.ndarray, shared: int, rows: int = RANGE_KEY_ROWS) -> np
 
 def heterogeneity(Xw: np.ndarray, yw: np.ndarray, key: np.ndarray,
                   groups: int = HETEROGENEITY_GROUPS) -> tuple[float, float]:
-    """(chi-square per degree of freedom, its upper tail) of the coefficients fitted apart on groups of the whitened
-    rows: the rows ``Xw``, ``yw`` (whitened by the run's row-noise model) split into ``groups`` of equal size by
-    ``|key|`` (where each row lies in the records' range: :func:`range_key`), least squares on each, and the
-    chi-square of the groups' estimates about their precision-weighted mean, sum_g (b_g - b)' P_g (b_g - b) with
-    P_g the group's sandwich precision, on (groups - 1) p degrees of freedom. About 1 and its tail uniform where the
-    model holds; NaNs when a group has no more rows than coefficients or no residual."""
+    """(chi-square per degree of freedom, its upper tail) of the coefficients fitted apart on
+    groups of the whitened rows: the rows ``Xw``, ``yw`` (whitened by the run's row-noise model)
+    split into ``groups`` of equal size by ``|key|`` (where each row lies in the records' range:
+    :func:`range_key`), least squares on each, and the chi-square of the groups' estimates about
+    their precision-weighted mean, sum_g (b_g - b)' P_g (b_g - b) with P_g the group's sandwich
+    precision, on (groups - 1) p degrees of freedom. About 1 and its tail uniform where the model
+    holds; NaNs when a group has no more rows than coefficients or no residual."""
     Xw, yw = np.asarray(Xw, float), np.asarray(yw, float)
     p = Xw.shape[1]
     nan = (float("nan"), float("nan"))
@@ -189,7 +199,8 @@ def heterogeneity(Xw: np.ndarray, yw: np.ndarray, key: np.ndarray,
 
 
 def _robust_cov(A: np.ndarray, r: np.ndarray) -> np.ndarray:
-    """The sandwich (HC1: White 1980) covariance of least squares on the rows ``A`` with residual ``r``."""
+    """The sandwich (HC1: White 1980) covariance of least squares on the rows ``A`` with residual
+    ``r``."""
     n, p = A.shape
     bread = np.linalg.pinv(A.T @ A)
     meat = (A * (r ** 2)[:, None]).T @ A * (n / max(n - p, 1))
@@ -197,11 +208,12 @@ def _robust_cov(A: np.ndarray, r: np.ndarray) -> np.ndarray:
 
 
 def omitted_terms(Xw: np.ndarray, Zw: np.ndarray, yw: np.ndarray, names=None) -> tuple[float, float, str]:
-    """(Wald statistic per degree of freedom, its upper tail, the term that alone explains most of the residual) of
-    the neighbouring terms ``Zw`` added to the model's whitened rows ``Xw`` (target ``yw``): least squares on
-    ``[Xw, Zw]``, the sandwich covariance of the added coefficients, ``b' V^-1 b`` on q degrees of freedom (q the
-    rank of ``Zw`` beyond ``Xw``). About 1 and its tail uniform where the model holds. ``names``: of ``Zw``'s
-    columns, for the third element (empty without). NaNs when there is no added column or no residual."""
+    """(Wald statistic per degree of freedom, its upper tail, the term that alone explains most
+    of the residual) of the neighbouring terms ``Zw`` added to the model's whitened rows ``Xw``
+    (target ``yw``): least squares on ``[Xw, Zw]``, the sandwich covariance of the added
+    coefficients, ``b' V^-1 b`` on q degrees of freedom (q the rank of ``Zw`` beyond ``Xw``).
+    About 1 and its tail uniform where the model holds. ``names``: of ``Zw``'s columns, for the
+    third element (empty without). NaNs when there is no added column or no residual."""
     Xw, Zw, yw = np.asarray(Xw, float), np.asarray(Zw, float), np.asarray(yw, float)
     nan = (float("nan"), float("nan"), "")
     if Zw.ndim != 2 or Zw.shape[1] == 0 or len(yw) <= Xw.shape[1] + Zw.shape[1]:
@@ -235,8 +247,8 @@ def omitted_terms(Xw: np.ndarray, Zw: np.ndarray, yw: np.ndarray, names=None) ->
 
 
 def _worst(metrics: dict, suffix: str, smallest: bool = False):
-    """(equation, value) of the ``est_<equation><suffix>`` diagnostic largest in size (``smallest``: the
-    smallest), or None when none was reported."""
+    """(equation, value) of the ``est_<equation><suffix>`` diagnostic largest in size
+    (``smallest``: the smallest), or None when none was reported."""
     found = [(k[len("est_"):-len(suffix)], float(v)) for k, v in metrics.items()
              if k.startswith("est_") and k.endswith(suffix) and isinstance(v, (int, float)) and np.isfinite(v)]
     if not found:
@@ -245,8 +257,9 @@ def _worst(metrics: dict, suffix: str, smallest: bool = False):
 
 
 def whiteness(metrics: dict) -> tuple[str, str, float] | None:
-    """(equation, lag, autocorrelation) of the whitened residual's largest autocorrelation at lag 1 or 2 over the
-    equations (the ``est_<equation>_whitened_acf<lag>`` diagnostics), or None when none was reported."""
+    """(equation, lag, autocorrelation) of the whitened residual's largest autocorrelation at lag
+    1 or 2 over the equations (the ``est_<equation>_whitened_acf<lag>`` diagnostics), or None
+    when none was reported."""
     found = [(k[len("est_"):].rsplit("_whitened_acf", 1), float(v)) for k, v in metrics.items()
              if k.startswith("est_") and "_whitened_acf" in k and isinstance(v, (int, float)) and np.isfinite(v)]
     if not found:
@@ -257,8 +270,9 @@ def whiteness(metrics: dict) -> tuple[str, str, float] | None:
 
 def run_verdict(likelihood: str, structure_name: str, bias_sd: dict, dropped_differences: int, corrected: bool,
                 metrics: dict) -> tuple[bool, str]:
-    """(trusted, note) of a run: :func:`verdict` with what the run's equations reported (``metrics``: the
-    ``est_<equation>_<diagnostic>`` entries of the results table) and the likelihood's own limit."""
+    """(trusted, note) of a run: :func:`verdict` with what the run's equations reported
+    (``metrics``: the ``est_<equation>_<diagnostic>`` entries of the results table) and the
+    likelihood's own limit."""
     if likelihood == "regression_iid":
         return False, ("likelihood regression_iid counts the rows as independent: intervals not calibrated "
                        "(8-150 times the actual spread measured); use likelihood regression")

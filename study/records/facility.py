@@ -1,28 +1,33 @@
-"""Where a record was measured (its *facility*), what can exist there, and the test set-up a record belongs to.
+"""Where a record was measured (its *facility*), what can exist there, and the test set-up a record
+belongs to.
 
-A facility is one of :data:`FACILITIES`: ``towing_tank``, ``basin``, ``pond`` or ``sea``. A record names it in
-its metadata (``# facility: towing_tank`` in a CSV header, ``facility`` in a Parquet file's ``study.meta``; the
-loaders of ``study.records.loaders`` set it for the real datasets), else the vessel config may (``facility:`` at its top
-level); a record with neither has no known facility, and nothing is ruled out for it.
+A facility is one of :data:`FACILITIES`: ``towing_tank``, ``basin``, ``pond`` or ``sea``. A record
+names it in its metadata (``# facility: towing_tank`` in a CSV header, ``facility`` in a Parquet
+file's ``study.meta``; the loaders of ``study.records.loaders`` set it for the real datasets), else
+the vessel config may (``facility:`` at its top level); a record with neither has no known facility,
+and nothing is ruled out for it.
 
 What the facility rules out (the model doctor's candidates, ``study.doctor.diagnose``):
 
-- **indoors** (a towing tank, a basin) there is no wind: an effect that needs wind (``needs = ("wind",)``, the
-  wind effect) is no candidate;
-- **still water** (a towing tank, a basin: the water at rest between runs) has no current: an effect that needs
-  a current is no candidate. A facility that generates wind or current is not one of these: name it ``sea``;
-- in a **pond** (outdoors, closed water) a current can only be the wind's drift. Wu (1975, J. Fluid Mech. 68,
-  49-70) measured the surface drift at 3.5 % of the wind speed at long fetch and a larger share at the short
-  fetches of a laboratory tank; the drift falls quickly below the surface (Glossary of Meteorology, American
-  Meteorological Society: "2.5-3.0 % of the wind speed ... decreases rapidly in the uppermost meter"), so the
-  current a hull feels over its draft is below the surface drift. A fitted current faster than
-  :data:`POND_DRIFT_SHARE` (twice Wu's 3.5 %, this project's margin for the short fetch) of the largest mean true
-  wind speed of the training records is rejected as implausible there; with no measured wind there is no bound.
+- **indoors** (a towing tank, a basin) there is no wind: an effect that needs wind (``needs =
+  ("wind",)``, the wind effect) is no candidate;
+- **still water** (a towing tank, a basin: the water at rest between runs) has no current: an effect
+  that needs a current is no candidate. A facility that generates wind or current is not one of
+  these: name it ``sea``;
+- in a **pond** (outdoors, closed water) a current can only be the wind's drift. Wu (1975, J. Fluid
+  Mech. 68, 49-70) measured the surface drift at 3.5 % of the wind speed at long fetch and a larger
+  share at the short fetches of a laboratory tank; the drift falls quickly below the surface
+  (Glossary of Meteorology, American Meteorological Society: "2.5-3.0 % of the wind speed ...
+  decreases rapidly in the uppermost meter"), so the current a hull feels over its draft is below
+  the surface drift. A fitted current faster than :data:`POND_DRIFT_SHARE` (twice Wu's 3.5 %, this
+  project's margin for the short fetch) of the largest mean true wind speed of the training records
+  is rejected as implausible there; with no measured wind there is no bound.
 
-The *set-up* of a record is its facility and its ``scale`` metadata (e.g. ``model``, ``full``, ``1:45.714``):
-an effect the doctor attributes to the test set-up (``setup_effect = True`` on the effect class, or in its YAML:
-a yaw bias from a rudder zero offset) belongs to the set-up its training records were measured in, and is left
-out of predictions for another facility or scale unless the user asks to keep it (:func:`other_setup`).
+The *set-up* of a record is its facility and its ``scale`` metadata (e.g. ``model``, ``full``,
+``1:45.714``): an effect the doctor attributes to the test set-up (``setup_effect = True`` on the
+effect class, or in its YAML: a yaw bias from a rudder zero offset) belongs to the set-up its
+training records were measured in, and is left out of predictions for another facility or scale
+unless the user asks to keep it (:func:`other_setup`).
 """
 from __future__ import annotations
 
@@ -63,8 +68,9 @@ POND_DRIFT_SHARE = 2 * 0.035
 
 
 def check(value, where: str) -> str:
-    """A facility name as given (``value``), or a ``ValueError`` in one line naming ``where`` (the file) and what
-    was expected (``study.records.schema`` raises it as its ``SchemaError``). ``None`` passes (no facility stated)."""
+    """A facility name as given (``value``), or a ``ValueError`` in one line naming ``where``
+    (the file) and what was expected (``study.records.schema`` raises it as its ``SchemaError``).
+    ``None`` passes (no facility stated)."""
     if value is None:
         return None
     if not isinstance(value, str) or value not in FACILITIES:
@@ -81,8 +87,8 @@ def facility_of(meta: dict | None, vessel_cfg: dict | None = None) -> str | None
 
 
 def ruled_out(effect, facilities: list) -> str | None:
-    """Why ``effect`` cannot act in any of the training records' ``facilities`` (one per record), or None. A record
-    of unknown facility (None) rules nothing out."""
+    """Why ``effect`` cannot act in any of the training records' ``facilities`` (one per record),
+    or None. A record of unknown facility (None) rules nothing out."""
     needs = tuple(getattr(effect, "needs", ()) or ())
     if not needs or not facilities or any(f is None for f in facilities):
         return None
@@ -96,8 +102,9 @@ def ruled_out(effect, facilities: list) -> str | None:
 
 
 def implausible(effect, values: dict, facilities: list, records: list) -> str | None:
-    """Why the fitted ``values`` (the effect's parameters in the user's terms, ``describe``) cannot be, in the
-    training records' ``facilities``; None when plausible or when nothing bounds them."""
+    """Why the fitted ``values`` (the effect's parameters in the user's terms, ``describe``)
+    cannot be, in the training records' ``facilities``; None when plausible or when nothing
+    bounds them."""
     needs = tuple(getattr(effect, "needs", ()) or ())
     if "current" not in needs or not facilities or set(facilities) != {"pond"}:
         return None
@@ -120,8 +127,9 @@ def setup_of(meta: dict | None, vessel_cfg: dict | None = None) -> tuple:
 
 
 def other_setup(setup: tuple, training: list) -> str | None:
-    """Why a prediction in ``setup`` is for another set-up than the ``training`` records' (a list of set-ups), or
-    None when it is the same or cannot be told (a facility or scale not stated on either side)."""
+    """Why a prediction in ``setup`` is for another set-up than the ``training`` records' (a list
+    of set-ups), or None when it is the same or cannot be told (a facility or scale not stated on
+    either side)."""
     facility, scale = setup
     fs = {f for f, _ in training}
     if facility is not None and None not in fs and facility not in fs:

@@ -1,28 +1,32 @@
 """Loaders of the real free-running data in ``../shared/data/real`` into the record schema.
 
-The data are read where they are and never copied into this repository (their licences differ from ours;
-see each folder's SOURCE.md). Where: the folder named by the environment variable ``STUDY_REAL_DATA``, else the
-first ``shared/data/real`` beside the repository or beside any folder above it (``<clone>/../shared/data/real``
-for a clone next to ``shared/``; a git worktree deeper down finds the same folder). :func:`real_data_dir` says
-where it looked when nothing is there.
+The data are read where they are and never copied into this repository (their licences differ from
+ours; see each folder's SOURCE.md). Where: the folder named by the environment variable
+``STUDY_REAL_DATA``, else the first ``shared/data/real`` beside the repository or beside any folder
+above it (``<clone>/../shared/data/real`` for a clone next to ``shared/``; a git worktree deeper
+down finds the same folder). :func:`real_data_dir` says where it looked when nothing is there.
 
-- Esso Osaka 3 m model, Osaka University (Wakita et al. 2022, J Mar Sci Technol 27, 772-785; Miyauchi et al.
-  2022, J Mar Sci Technol 27, 1065-1083), CC BY-NC-SA 4.0. Already SI, radians, body velocities at midship,
-  delta > 0 to starboard (our convention). Wind directions were checked against the data here: the true and
-  apparent wind directions are where the wind comes FROM (recomputing the apparent wind from the true wind and
-  the ship's motion with that reading matches the logged apparent wind to 1e-3; the opposite reading misses
-  by 0.2-0.4 rad), the true one clockwise from x0, the apparent one from the bow, + from starboard.
-- KVLCC2 L7 model at HSVA, SIMMAN 2008 (Stern et al. 2011, J Ship Res 55, 135-147; HSVA report by A. Cura
-  Hochbaum 2006; redistributed by Alexandersson et al. 2022, Ocean Eng 266, 112940). Degrees, earth-fixed
-  velocities and delta > 0 to PORT in the files: converted here. The CPMC reference point is not stated in
-  the report excerpt we have; positions and velocities are taken as given (assumed midship, labelled in meta).
+- Esso Osaka 3 m model, Osaka University (Wakita et al. 2022, J Mar Sci Technol 27, 772-785;
+  Miyauchi et al. 2022, J Mar Sci Technol 27, 1065-1083), CC BY-NC-SA 4.0. Already SI, radians, body
+  velocities at midship, delta > 0 to starboard (our convention). Wind directions were checked
+  against the data here: the true and apparent wind directions are where the wind comes FROM
+  (recomputing the apparent wind from the true wind and the ship's motion with that reading matches
+  the logged apparent wind to 1e-3; the opposite reading misses by 0.2-0.4 rad), the true one
+  clockwise from x0, the apparent one from the bow, + from starboard.
+- KVLCC2 L7 model at HSVA, SIMMAN 2008 (Stern et al. 2011, J Ship Res 55, 135-147; HSVA report by A.
+  Cura Hochbaum 2006; redistributed by Alexandersson et al. 2022, Ocean Eng 266, 112940). Degrees,
+  earth-fixed velocities and delta > 0 to PORT in the files: converted here. The CPMC reference
+  point is not stated in the report excerpt we have; positions and velocities are taken as given
+  (assumed midship, labelled in meta).
 
-Each record's metadata name its facility (``study.records.facility``): Esso Osaka's ``pond`` (the Inukai pond of Osaka
-University, outdoors, SOURCE.md), HSVA's ``towing_tank`` (HSVA's large towing tank, 300 x 18 x 6 m, the CPMC
-carriage following the model; SOURCE.md), with its ``scale`` 1:45.714.
+Each record's metadata name its facility (``study.records.facility``): Esso Osaka's ``pond`` (the
+Inukai pond of Osaka University, outdoors, SOURCE.md), HSVA's ``towing_tank`` (HSVA's large towing
+tank, 300 x 18 x 6 m, the CPMC carriage following the model; SOURCE.md), with its ``scale``
+1:45.714.
 
-:func:`load_records` reads the records a pattern names (a file, folder, glob or comma-separated list of them), schema
-files and the real datasets' own formats alike (the doctor's reading; a run on files reads them one by one).
+:func:`load_records` reads the records a pattern names (a file, folder, glob or comma-separated list
+of them), schema files and the real datasets' own formats alike (the doctor's reading; a run on
+files reads them one by one).
 """
 from __future__ import annotations
 
@@ -50,8 +54,9 @@ def _candidates() -> list[Path]:
 
 def real_data_dir() -> Path:
     """The folder of the real datasets: ``$STUDY_REAL_DATA`` if set, else the nearest existing
-    ``shared/data/real`` above the repository, else where it is expected (``<repo>/../shared/data/real``; it may
-    not exist: :func:`missing_real_data` says so in one line)."""
+    ``shared/data/real`` above the repository, else where it is expected
+    (``<repo>/../shared/data/real``; it may not exist: :func:`missing_real_data` says so in one
+    line)."""
     env = os.environ.get(ENV_VAR)
     if env:
         return Path(env).expanduser()
@@ -75,11 +80,13 @@ def missing_real_data(dataset: str | None = None) -> str:
 
 
 class RealDataMissing(FileNotFoundError):
-    """The real datasets are not where the project looks for them (the message says where and how to fix)."""
+    """The real datasets are not where the project looks for them (the message says where and how
+    to fix)."""
 
 
 def require_real_records(dataset: str, data_dir=None, kind: str | None = None) -> list[Path]:
-    """:func:`list_real_records`, raising :class:`RealDataMissing` with a one-line fix when there are none."""
+    """:func:`list_real_records`, raising :class:`RealDataMissing` with a one-line fix when there
+    are none."""
     files = list_real_records(dataset, data_dir, kind)
     if not files:
         if data_dir:
@@ -99,9 +106,9 @@ ESSO_COLUMNS = {
 def load_esso_osaka(path, trim: bool = False) -> Record:
     """One CSV of ``esso_osaka_frt/data/{zigzag,turning,random}``.
 
-    ``trim=True`` keeps the manoeuvre proper: from the first sample with |delta| >= 0.9 max|delta| after the
-    speed has built up (u above 80 % of its maximum) to the last sample with the propeller running (the rule
-    suggested in SOURCE.md).
+    ``trim=True`` keeps the manoeuvre proper: from the first sample with |delta| >= 0.9 max|delta|
+    after the speed has built up (u above 80 % of its maximum) to the last sample with the propeller
+    running (the rule suggested in SOURCE.md).
     """
     path = Path(path)
     if not path.exists():
@@ -143,7 +150,8 @@ def load_esso_osaka(path, trim: bool = False) -> Record:
 
 
 def load_kvlcc2_hsva(path) -> Record:
-    """One ``.dat`` of ``kvlcc2_hsva/raw_data`` (cp1252, 4 header lines, 12 columns; see SOURCE.md)."""
+    """One ``.dat`` of ``kvlcc2_hsva/raw_data`` (cp1252, 4 header lines, 12 columns; see
+    SOURCE.md)."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{path}: no such HSVA file")
@@ -184,7 +192,8 @@ def load_kvlcc2_hsva(path) -> Record:
 
 
 def list_real_records(dataset: str, data_dir=None, kind: str | None = None) -> list[Path]:
-    """Sorted paths of a real dataset ('esso_osaka' optionally by kind 'zigzag'/'turning'/'random')."""
+    """Sorted paths of a real dataset ('esso_osaka' optionally by kind
+    'zigzag'/'turning'/'random')."""
     root = Path(data_dir) if data_dir else real_data_dir()
     if dataset == "esso_osaka":
         base = root / "esso_osaka_frt" / "data"
@@ -207,7 +216,8 @@ def load_real(path) -> Record:
 
 # ------------------------------------------------------------------------ record files named by patterns
 def patterns(spec) -> list:
-    """A ``train``/``validate`` value as a list of patterns: a list as it is, a string split at commas."""
+    """A ``train``/``validate`` value as a list of patterns: a list as it is, a string split at
+    commas."""
     if spec is None:
         return []
     items = list(spec) if isinstance(spec, (list, tuple)) else [p for p in str(spec).split(",")]
@@ -215,7 +225,8 @@ def patterns(spec) -> list:
 
 
 def is_real(path: Path) -> bool:
-    """A file in one of the real datasets' own formats (HSVA ``.dat``, an Esso Osaka CSV), not a schema file."""
+    """A file in one of the real datasets' own formats (HSVA ``.dat``, an Esso Osaka CSV), not a
+    schema file."""
     if path.suffix.lower() == ".dat":
         return True
     if path.suffix.lower() == ".csv":
@@ -226,9 +237,10 @@ def is_real(path: Path) -> bool:
 
 
 def load_records(spec, states: str = "measured", state_options: dict | None = None) -> list:
-    """Records from a file, folder or glob, or a comma-separated list of them: schema files, or the real
-    datasets' own formats. ``states`` (``measured | auto | ekf``) and ``state_options``: where u, v, r come from
-    (``study.records.schema.read_record``; the real datasets' loaders always give u, v, r, which ``ekf`` refines)."""
+    """Records from a file, folder or glob, or a comma-separated list of them: schema files, or
+    the real datasets' own formats. ``states`` (``measured | auto | ekf``) and ``state_options``:
+    where u, v, r come from (``study.records.schema.read_record``; the real datasets' loaders
+    always give u, v, r, which ``ekf`` refines)."""
     from study.records.schema import STATES, SUPPORTED, read_record, with_estimated_states
 
     if states not in STATES:

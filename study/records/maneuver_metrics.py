@@ -1,48 +1,57 @@
-"""A replayed model compared in the ship's own terms: standard manoeuvre metrics of each validation record,
-measured against the replays of two models (the doctor's baseline and final model; a run on files' identified
+"""A replayed model compared in the ship's own terms: standard manoeuvre metrics of each validation
+record, measured against the replays of two models (the doctor's baseline and final model; a run on
+files' identified
 model).
 
-:func:`maneuver_metrics` gives one row per record and metric, ``{'record', 'metric', 'unit', 'measured',
-'baseline', 'final'}``; ``study.doctor.html.metrics_table_html`` renders such rows as a small HTML table (the
-doctor's report). The metrics are those
-of :mod:`study.records.metrics` (IMO MSC.137(76), MSC/Circ.1053, ITTC 7.5-04-02-01), computed with the same functions on
-the measured record and on both replays:
+:func:`maneuver_metrics` gives one row per record and metric, ``{'record', 'metric', 'unit',
+'measured', 'baseline', 'final'}``; ``study.doctor.html.metrics_table_html`` renders such rows as a
+small HTML table (the doctor's report). The metrics are those of :mod:`study.records.metrics` (IMO
+MSC.137(76), MSC/Circ.1053, ITTC 7.5-04-02-01), computed with the same functions on the measured
+record and on both replays:
 
-- **turning circle**: ``advance``, ``transfer``, ``tactical_diameter`` [m] and the same in ship lengths
-  (``advance_L``, ``transfer_L``, ``tactical_diameter_L`` [L]), ``steady_turning_rate`` [deg/s];
-- **zigzag**: ``first_overshoot``, ``second_overshoot`` [deg], ``period``, ``initial_turning_time`` and
-  ``time_to_check_yaw`` [s];
-- **anything else** (random rudder, straight runs): no rows -- the per-channel errors of the report cover them.
+- **turning circle**: ``advance``, ``transfer``, ``tactical_diameter`` [m] and the same in ship
+  lengths (``advance_L``, ``transfer_L``, ``tactical_diameter_L`` [L]), ``steady_turning_rate``
+  [deg/s];
+- **zigzag**: ``first_overshoot``, ``second_overshoot`` [deg], ``period``, ``initial_turning_time``
+  and ``time_to_check_yaw`` [s];
+- **anything else** (random rudder, straight runs): no rows -- the per-channel errors of the report
+  cover them.
 
 Choices made here:
 
-- *The kind* is found on the **measured** record and used for all three columns (a replay uses the measured
-  rudder, so it is the same manoeuvre). A record that :func:`study.records.metrics.detect_maneuver` calls a zigzag is
-  taken whole. Otherwise a rudder test of this module (:func:`_own_kind`) looks for the manoeuvre at the end of
-  the record: a real record often starts with the helmsman's course keeping (the Esso Osaka pond runs), where
-  the execution of :mod:`study.records.metrics` (the first rudder movement) would fall, so that ``detect_maneuver``
-  calls it "other", or a turning circle with its origin in the approach. When the test finds a turning circle
-  or a zigzag, the three records are cut at the start of the rudder movement into it (keeping the quiet rudder
-  just before it) before the metrics, and the doctor's two replays for them start there, from the measured state
-  (:func:`manoeuvre_start`): replayed from the start of the record, a model arrives at the execution with the
-  approach's accumulated errors (an Esso Osaka run starts at rest, where an MMG model is not meant to work), and
-  the metrics would compare the approach, not the manoeuvre. A clean simulated record is not cut. A record the test rejects and
-  ``detect_maneuver`` calls a turning circle is taken whole; anything else gives no rows.
-- *Overshoots of a replay* are measured from the **measured** record's switch heading (the heading change at
-  its first rudder reversal; their own when the measured record has none): the replay reverses its rudder when
-  the ship did, not at its own heading, and the same reference compares the heading extremes themselves.
-- *Period* is the standard one (IMO/ITTC; ``period`` of :func:`study.records.metrics.zigzag_metrics`, between rudder
-  movements). In an open-loop replay the rudder moves when it did in the measurement, so the replays' period
-  equals the measured one by construction (it is shown because it characterises the record); the model's own
-  timing shows in ``initial_turning_time`` (rudder execution to the switch heading) and ``time_to_check_yaw``
-  (first rudder reversal to the heading's extreme), both from the same function.
-- *Steady turning rate* is ``steady_turning_rate_deg`` of :func:`study.records.metrics.turning_metrics` (mean |r| on the
-  steady part of the turn). Its band of a steady yaw rate is 2 %; when that finds no steady stretch on the
-  measured record (wind and noise make a real turn's r wander), the first of 5, 10 and 20 % that does, the same
-  band then for the measured record and both replays.
-- A metric that a record cannot carry (the turn never reaches 180 deg, the record ends before the second
-  overshoot, a function of :mod:`study.records.metrics` raising on a short or odd record) or a replay that diverged
-  (``None``) is NaN, never an exception.
+- *The kind* is found on the **measured** record and used for all three columns (a replay uses the
+  measured rudder, so it is the same manoeuvre). A record that
+  :func:`study.records.metrics.detect_maneuver` calls a zigzag is taken whole. Otherwise a rudder
+  test of this module (:func:`_own_kind`) looks for the manoeuvre at the end of the record: a real
+  record often starts with the helmsman's course keeping (the Esso Osaka pond runs), where the
+  execution of :mod:`study.records.metrics` (the first rudder movement) would fall, so that
+  ``detect_maneuver`` calls it "other", or a turning circle with its origin in the approach. When
+  the test finds a turning circle or a zigzag, the three records are cut at the start of the rudder
+  movement into it (keeping the quiet rudder just before it) before the metrics, and the doctor's
+  two replays for them start there, from the measured state (:func:`manoeuvre_start`): replayed from
+  the start of the record, a model arrives at the execution with the approach's accumulated errors
+  (an Esso Osaka run starts at rest, where an MMG model is not meant to work), and the metrics would
+  compare the approach, not the manoeuvre. A clean simulated record is not cut. A record the test
+  rejects and ``detect_maneuver`` calls a turning circle is taken whole; anything else gives no
+  rows.
+- *Overshoots of a replay* are measured from the **measured** record's switch heading (the heading
+  change at its first rudder reversal; their own when the measured record has none): the replay
+  reverses its rudder when the ship did, not at its own heading, and the same reference compares the
+  heading extremes themselves.
+- *Period* is the standard one (IMO/ITTC; ``period`` of
+  :func:`study.records.metrics.zigzag_metrics`, between rudder movements). In an open-loop replay
+  the rudder moves when it did in the measurement, so the replays' period equals the measured one by
+  construction (it is shown because it characterises the record); the model's own timing shows in
+  ``initial_turning_time`` (rudder execution to the switch heading) and ``time_to_check_yaw`` (first
+  rudder reversal to the heading's extreme), both from the same function.
+- *Steady turning rate* is ``steady_turning_rate_deg`` of
+  :func:`study.records.metrics.turning_metrics` (mean |r| on the steady part of the turn). Its band
+  of a steady yaw rate is 2 %; when that finds no steady stretch on the measured record (wind and
+  noise make a real turn's r wander), the first of 5, 10 and 20 % that does, the same band then for
+  the measured record and both replays.
+- A metric that a record cannot carry (the turn never reaches 180 deg, the record ends before the
+  second overshoot, a function of :mod:`study.records.metrics` raising on a short or odd record) or
+  a replay that diverged (``None``) is NaN, never an exception.
 """
 from __future__ import annotations
 
@@ -87,7 +96,8 @@ def _usable(df) -> bool:
 
 
 def _noise_sigma(delta: np.ndarray) -> float:
-    """Robust noise sigma of the rudder from its first differences (as :mod:`study.records.metrics` estimates it)."""
+    """Robust noise sigma of the rudder from its first differences (as
+    :mod:`study.records.metrics` estimates it)."""
     dd = np.diff(delta)
     if dd.size == 0:
         return 0.0
@@ -102,19 +112,20 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 def _own_kind(df: pd.DataFrame) -> tuple[str, float | None]:
-    """Rudder test for records whose first rudder movement is not the manoeuvre's (manual course-keeping before a
-    turning circle or zigzag, as in the Esso Osaka pond runs): ``(kind, t0)``, ``t0`` the time from which the
-    records are to be cut (None: from their start).
+    """Rudder test for records whose first rudder movement is not the manoeuvre's (manual
+    course-keeping before a turning circle or zigzag, as in the Esso Osaka pond runs): ``(kind,
+    t0)``, ``t0`` the time from which the records are to be cut (None: from their start).
 
-    The manoeuvre's rudder angle ``P`` is the 90th percentile of |delta| over the second half of the record (where
-    the manoeuvre is); *holds* are the runs of |delta| >= 0.8 P. From the last hold backwards, holds are chained
-    while the rudder goes straight from one to the next (a monotone movement to the other side: a zigzag's
-    reversal; or a dip on the same side that stays above P/2); the approach's steering breaks the chain. One hold
-    (or a last hold three times as long as the rest of the chain: a short counter-steer before the turn) with
-    90 deg of heading change and no excursion to the other side after it is a turning circle; three or more
-    covering 30 % of the record, each reversed with the heading on the side of its rudder (at a heading change
-    within a factor 3 of the first), a zigzag. The records are cut at the start of the movement into the chain's
-    first hold, keeping the quiet rudder just before it.
+    The manoeuvre's rudder angle ``P`` is the 90th percentile of |delta| over the second half of the
+    record (where the manoeuvre is); *holds* are the runs of |delta| >= 0.8 P. From the last hold
+    backwards, holds are chained while the rudder goes straight from one to the next (a monotone
+    movement to the other side: a zigzag's reversal; or a dip on the same side that stays above
+    P/2); the approach's steering breaks the chain. One hold (or a last hold three times as long as
+    the rest of the chain: a short counter-steer before the turn) with 90 deg of heading change and
+    no excursion to the other side after it is a turning circle; three or more covering 30 % of the
+    record, each reversed with the heading on the side of its rudder (at a heading change within a
+    factor 3 of the first), a zigzag. The records are cut at the start of the movement into the
+    chain's first hold, keeping the quiet rudder just before it.
     """
     t = df["time"].to_numpy(float)
     delta = df["delta"].to_numpy(float)
@@ -187,15 +198,17 @@ def _kind(measured) -> tuple[str, float | None]:
 
 
 def manoeuvre_start(measured) -> float | None:
-    """The time a measured record's manoeuvre starts (where :func:`maneuver_metrics` cuts the records), None
-    when it is taken whole. The doctor replays a cut record from its measured state there (see
+    """The time a measured record's manoeuvre starts (where :func:`maneuver_metrics` cuts the
+    records), None when it is taken whole. The doctor replays a cut record from its measured state
+    there (see
     ``study.doctor.report.manoeuvre_predictions``)."""
     return _kind(measured)[1]
 
 
 # ---------------------------------------------------------------------------------------------- the metrics
 def _clean(df, t0: float | None):
-    """The record as the metrics need it (time-sorted, finite), cut from ``t0``; None when it cannot be used."""
+    """The record as the metrics need it (time-sorted, finite), cut from ``t0``; None when it
+    cannot be used."""
     if not isinstance(df, pd.DataFrame) or any(c not in df.columns for c in _NEED):
         return None
     d = df.loc[:, list(_NEED)].apply(pd.to_numeric, errors="coerce")
@@ -230,8 +243,9 @@ def _turning(df, L: float | None, steady_tol: float = 0.02) -> dict:
 
 
 def _steady_tol(df, L: float | None) -> float:
-    """The band of :func:`study.records.metrics.turning_metrics`'s steady turn for this measured record: its 2 %, else the
-    first of 5, 10, 20 % that finds a steady stretch (wind and noise make a real turn's r wander)."""
+    """The band of :func:`study.records.metrics.turning_metrics`'s steady turn for this measured
+    record: its 2 %, else the first of 5, 10, 20 % that finds a steady stretch (wind and noise
+    make a real turn's r wander)."""
     for tol in STEADY_TOLS:
         if math.isfinite(_turning(df, L, tol)["steady_turning_rate"]):
             return tol
@@ -266,17 +280,18 @@ def maneuver_metrics(name: str, measured: pd.DataFrame, baseline: pd.DataFrame |
     measured : DataFrame
         The measured record (``time, u, v, r, x0, y0, psi, delta``; SI units, radians).
     baseline, final : DataFrame or None
-        The baseline and the final model replayed through the record (same columns), or None when the replay
-        diverged: that column is NaN.
+        The baseline and the final model replayed through the record (same columns), or None when
+        the replay diverged: that column is NaN.
     L : float
         Ship length [m] for the ``*_L`` rows (NaN there when it is not a positive number).
 
     Returns
     -------
     list of dict
-        Rows ``{'record', 'metric', 'unit', 'measured', 'baseline', 'final'}`` (values floats, NaN where the
-        metric cannot be measured): for a turning circle :data:`TURNING_METRICS`, for a zigzag
-        :data:`ZIGZAG_METRICS`, for anything else none. Never raises on odd records (see the module docstring).
+        Rows ``{'record', 'metric', 'unit', 'measured', 'baseline', 'final'}`` (values floats, NaN
+        where the metric cannot be measured): for a turning circle :data:`TURNING_METRICS`, for a
+        zigzag :data:`ZIGZAG_METRICS`, for anything else none. Never raises on odd records (see the
+        module docstring).
     """
     kind, t0 = _kind(measured)
     if kind not in ("turning", "zigzag"):

@@ -3,32 +3,35 @@
 Processing order in :meth:`MeasurementModel.apply` (each step optional):
 
 1. **sampling** at ``dt`` (exact source samples where the time exists, else linear interpolation);
-2. per channel, on the sampled clean signal, the noise scale ``S_c``: the RMS of the signal, except for the
-   *offset channels* (``psi``, ``x0``, ``y0`` by default) where it is the RMS of the deviation from the mean
-   (the standard deviation). Heading and positions carry arbitrary offsets (initial heading, where the origin
-   is) that say nothing about how large the measured variation is; the deviation from the mean does not
-   depend on them, so the same noise fraction means the same thing for every record;
-3. white Gaussian noise with standard deviation ``noise_level * S_c`` (the *relative* model) and/or an absolute
-   standard deviation ``noise_sd[c]`` in the channel's own units (the *absolute* model: a sensor's accuracy, as
-   the configs of ``conf/noise/`` give it per sensor; both given, the two add as independent noises:
-   ``sqrt((noise_level * S_c)^2 + noise_sd^2)``);
-4. coloured noise: a first-order Gauss-Markov process (exact discretisation of an Ornstein-Uhlenbeck process,
-   AR(1) on a uniform grid) with correlation time ``tau`` and stationary standard deviation ``level * S_c``;
-   lag-1 autocorrelation ``exp(-dt / tau)`` (Gelb 1974, *Applied Optimal Estimation*, sec. 3.8; Brown & Hwang
-   2012, *Introduction to Random Signals and Applied Kalman Filtering*, 4th ed., sec. 2.9);
+2. per channel, on the sampled clean signal, the noise scale ``S_c``: the RMS of the signal, except
+   for the *offset channels* (``psi``, ``x0``, ``y0`` by default) where it is the RMS of the
+   deviation from the mean (the standard deviation). Heading and positions carry arbitrary offsets
+   (initial heading, where the origin is) that say nothing about how large the measured variation
+   is; the deviation from the mean does not depend on them, so the same noise fraction means the
+   same thing for every record;
+3. white Gaussian noise with standard deviation ``noise_level * S_c`` (the *relative* model) and/or
+   an absolute standard deviation ``noise_sd[c]`` in the channel's own units (the *absolute* model:
+   a sensor's accuracy, as the configs of ``conf/noise/`` give it per sensor; both given, the two
+   add as independent noises: ``sqrt((noise_level * S_c)^2 + noise_sd^2)``);
+4. coloured noise: a first-order Gauss-Markov process (exact discretisation of an Ornstein-Uhlenbeck
+   process, AR(1) on a uniform grid) with correlation time ``tau`` and stationary standard deviation
+   ``level * S_c``; lag-1 autocorrelation ``exp(-dt / tau)`` (Gelb 1974, *Applied Optimal
+   Estimation*, sec. 3.8; Brown & Hwang 2012, *Introduction to Random Signals and Applied Kalman
+   Filtering*, 4th ed., sec. 2.9);
 5. constant bias per channel;
-6. outliers: with probability ``prob`` per sample and channel, a spike of ``size`` times the channel's white
-   noise sigma (``scale='sigma'``, default) or times ``S_c`` (``scale='rms'``) with a random sign;
-7. dropouts: samples (whole rows) removed, independently with probability ``prob`` or in bursts with mean
-   length ``burst`` samples (two-state Markov / Gilbert-Elliott loss model with stationary loss fraction
-   ``prob``; Gilbert 1960, Bell Syst. Tech. J. 39(5)). Rows are removed, never set to NaN (the record schema
-   forbids NaN).
+6. outliers: with probability ``prob`` per sample and channel, a spike of ``size`` times the
+   channel's white noise sigma (``scale='sigma'``, default) or times ``S_c`` (``scale='rms'``) with
+   a random sign;
+7. dropouts: samples (whole rows) removed, independently with probability ``prob`` or in bursts with
+   mean length ``burst`` samples (two-state Markov / Gilbert-Elliott loss model with stationary loss
+   fraction ``prob``; Gilbert 1960, Bell Syst. Tech. J. 39(5)). Rows are removed, never set to NaN
+   (the record schema forbids NaN).
 
-Random streams: every stream is a child of ``np.random.SeedSequence(seed)`` with a spawn key made from the
-channel *name* (CRC-32) and the process (white, coloured, outliers), the same mechanism as
-``SeedSequence.spawn`` but keyed by name rather than by position, so adding, removing or reordering channels
-never changes another channel's noise, and switching on outliers never changes the white noise. Dropouts have
-their own stream.
+Random streams: every stream is a child of ``np.random.SeedSequence(seed)`` with a spawn key made
+from the channel *name* (CRC-32) and the process (white, coloured, outliers), the same mechanism as
+``SeedSequence.spawn`` but keyed by name rather than by position, so adding, removing or reordering
+channels never changes another channel's noise, and switching on outliers never changes the white
+noise. Dropouts have their own stream.
 """
 from __future__ import annotations
 
@@ -53,8 +56,9 @@ NOISE_KINDS = ("relative", "absolute")
 
 
 def sensor_sd(sensors: dict, where: str = "noise") -> dict:
-    """Channel -> absolute standard deviation in SI units and radians, from ``{sensor key: sd}`` in the keys'
-    units (:data:`SENSORS`); an unknown key or a negative value is an error naming it."""
+    """Channel -> absolute standard deviation in SI units and radians, from ``{sensor key: sd}``
+    in the keys' units (:data:`SENSORS`); an unknown key or a negative value is an error naming
+    it."""
     out = {}
     for key, val in (sensors or {}).items():
         if key not in SENSORS:
@@ -70,7 +74,8 @@ _PROCESSES = {"white": 0, "colored": 1, "outliers": 2}
 
 
 def _stream(seed: int, name: str, process: str | None = None) -> np.random.Generator:
-    """Generator for (channel name, process): a SeedSequence child keyed by name, see the module docstring."""
+    """Generator for (channel name, process): a SeedSequence child keyed by name, see the module
+    docstring."""
     root = np.random.SeedSequence(seed)
     key = (zlib.crc32(name.encode("utf-8")),) + (() if process is None else (_PROCESSES[process],))
     return np.random.default_rng(np.random.SeedSequence(root.entropy, spawn_key=key))
@@ -162,32 +167,37 @@ def _per_channel(value, channels, what: str) -> dict:
 
 @dataclass
 class MeasurementModel:
-    """Seeded measurement model; see the module docstring for the processing and the noise definitions.
+    """Seeded measurement model; see the module docstring for the processing and the noise
+    definitions.
 
     Parameters
     ----------
     dt : float or None
-        Sample interval [s]; ``None`` keeps the record's own time stamps. Must not be finer than the record.
+        Sample interval [s]; ``None`` keeps the record's own time stamps. Must not be finer than the
+        record.
     channels : tuple of str
-        Columns that receive noise, bias and outliers (default ``u, v, r, psi, x0, y0, delta``). Other columns
-        (``n``, ...) are only sampled.
+        Columns that receive noise, bias and outliers (default ``u, v, r, psi, x0, y0, delta``).
+        Other columns (``n``, ...) are only sampled.
     noise_level : float or dict
-        White-noise standard deviation as a fraction of each channel's scale ``S_c`` (RMS; RMS of the deviation
-        from the mean for ``offset_channels``). A dict gives it per channel (absent channels: 0).
+        White-noise standard deviation as a fraction of each channel's scale ``S_c`` (RMS; RMS of
+        the deviation from the mean for ``offset_channels``). A dict gives it per channel (absent
+        channels: 0).
     noise_sd : dict or None
-        Absolute white-noise standard deviation per channel, in the channel's units (m, m/s, rad, rad/s); absent
-        channels: 0. ``study.run.pipeline.measurement`` fills it from a noise config of ``kind: absolute``.
+        Absolute white-noise standard deviation per channel, in the channel's units (m, m/s, rad,
+        rad/s); absent channels: 0. ``study.run.pipeline.measurement`` fills it from a noise config
+        of ``kind: absolute``.
     bias : dict
         Channel -> constant added, in the channel's units (SI, rad).
     colored : dict or None
-        ``{'tau': s, 'level': fraction}`` (``level`` a float or a dict per channel): Gauss-Markov noise with
-        correlation time ``tau`` and standard deviation ``level * S_c``.
+        ``{'tau': s, 'level': fraction}`` (``level`` a float or a dict per channel): Gauss-Markov
+        noise with correlation time ``tau`` and standard deviation ``level * S_c``.
     outliers : dict or None
-        ``{'prob': p, 'size': k, 'scale': 'sigma' | 'rms', 'channels': [...]}``; a spike of ``k`` white-noise
-        sigmas (default; channels without white noise then get no spikes) or ``k * S_c``.
+        ``{'prob': p, 'size': k, 'scale': 'sigma' | 'rms', 'channels': [...]}``; a spike of ``k``
+        white-noise sigmas (default; channels without white noise then get no spikes) or ``k *
+        S_c``.
     dropouts : dict or None
-        ``{'prob': p}`` (independent losses) plus optionally ``'burst'`` (mean burst length in samples, >= 1)
-        or ``'burst_s'`` (in seconds). Lost rows are removed.
+        ``{'prob': p}`` (independent losses) plus optionally ``'burst'`` (mean burst length in
+        samples, >= 1) or ``'burst_s'`` (in seconds). Lost rows are removed.
     seed : int
         Seed of every random stream.
     offset_channels : tuple of str
@@ -216,7 +226,8 @@ class MeasurementModel:
         return out
 
     def apply(self, df: pd.DataFrame) -> pd.DataFrame:
-        """Return the measured version of the clean record ``df`` (a new frame; ``df`` is not modified).
+        """Return the measured version of the clean record ``df`` (a new frame; ``df`` is not
+        modified).
 
         Raises
         ------

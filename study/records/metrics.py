@@ -1,33 +1,36 @@
 """Standard manoeuvring metrics and prediction-accuracy metrics.
 
-Definitions follow IMO Resolution MSC.137(76) "Standards for ship manoeuvrability" (2002), its explanatory
-notes MSC/Circ.1053 (2002), and ITTC Recommended Procedure 7.5-04-02-01 "Full Scale Manoeuvring Trials"
-(2017). Signs and frames follow ``docs/conventions.md``: ``delta > 0`` turns the ship to starboard (r > 0),
-``psi`` is clockwise from north in radians and unwrapped, ``x0`` north, ``y0`` east.
+Definitions follow IMO Resolution MSC.137(76) "Standards for ship manoeuvrability" (2002), its
+explanatory notes MSC/Circ.1053 (2002), and ITTC Recommended Procedure 7.5-04-02-01 "Full Scale
+Manoeuvring Trials" (2017). Signs and frames follow ``docs/conventions.md``: ``delta > 0`` turns the
+ship to starboard (r > 0), ``psi`` is clockwise from north in radians and unwrapped, ``x0`` north,
+``y0`` east.
 
 Conventions chosen here (the standards leave them to the analyst):
 
-- **Rudder execution** is the first sample at which ``|delta - delta[0]|`` exceeds 0.5 deg, moved back to the
-  start of that rudder movement (the last sample before the rudder began to move monotonically), then to the
-  sub-sample instant where the line through the first two moving samples leaves the initial angle (a
-  rate-limited rudder moves linearly; on a coarse record this removes up to one sample of error). The heading
-  and position at that instant (linearly interpolated) are the origin of every heading change and distance.
-- **Rudder reversal** (zigzag "second, third, ... execute"): the start of the rudder movement towards the
-  other side, found in the same way (departure by more than 0.5 deg from the plateau, moved back to the start
-  of the monotone movement, refined between samples). A reversal counts only once the rudder has actually
-  crossed to the other side by ``max(0.5 deg, a quarter of the largest rudder angle)``, so noise around
-  midship is never a reversal.
-- **Noisy rudder records**: the rudder noise sigma is estimated robustly from the first differences (zero on
-  the plateaus of a clean record, so clean records are unaffected); if it is not zero the threshold becomes
-  ``max(0.5 deg, 6 sigma)``, the initial angle the median of the samples before the rudder clearly moved, and
-  the start of each movement is where a least-squares line through its ramp meets the plateau it leaves
-  (sample-by-sample tests cannot see a start buried in noise). Heading and position noise is not filtered:
-  the overshoots of a noisy record are biased upwards by the heading noise extremes.
-- All angles returned by the zigzag metrics are in degrees (as tabulated by IMO and ITTC); times in seconds;
-  lengths in metres (and in ship lengths under ``*_L`` when ``L`` is given).
-- Quantities that a record is too short to determine are ``NaN``; a record that cannot carry the metric at
-  all (no rudder execution, no reversal in a "zigzag", heading never reaching 90 deg in a "turning circle")
-  raises :class:`ValueError` naming the problem.
+- **Rudder execution** is the first sample at which ``|delta - delta[0]|`` exceeds 0.5 deg, moved
+  back to the start of that rudder movement (the last sample before the rudder began to move
+  monotonically), then to the sub-sample instant where the line through the first two moving samples
+  leaves the initial angle (a rate-limited rudder moves linearly; on a coarse record this removes up
+  to one sample of error). The heading and position at that instant (linearly interpolated) are the
+  origin of every heading change and distance.
+- **Rudder reversal** (zigzag "second, third, ... execute"): the start of the rudder movement
+  towards the other side, found in the same way (departure by more than 0.5 deg from the plateau,
+  moved back to the start of the monotone movement, refined between samples). A reversal counts only
+  once the rudder has actually crossed to the other side by ``max(0.5 deg, a quarter of the largest
+  rudder angle)``, so noise around midship is never a reversal.
+- **Noisy rudder records**: the rudder noise sigma is estimated robustly from the first differences
+  (zero on the plateaus of a clean record, so clean records are unaffected); if it is not zero the
+  threshold becomes ``max(0.5 deg, 6 sigma)``, the initial angle the median of the samples before
+  the rudder clearly moved, and the start of each movement is where a least-squares line through its
+  ramp meets the plateau it leaves (sample-by-sample tests cannot see a start buried in noise).
+  Heading and position noise is not filtered: the overshoots of a noisy record are biased upwards by
+  the heading noise extremes.
+- All angles returned by the zigzag metrics are in degrees (as tabulated by IMO and ITTC); times in
+  seconds; lengths in metres (and in ship lengths under ``*_L`` when ``L`` is given).
+- Quantities that a record is too short to determine are ``NaN``; a record that cannot carry the
+  metric at all (no rudder execution, no reversal in a "zigzag", heading never reaching 90 deg in a
+  "turning circle") raises :class:`ValueError` naming the problem.
 """
 from __future__ import annotations
 
@@ -60,7 +63,8 @@ def _columns(df: pd.DataFrame, cols, what: str) -> dict:
 
 
 def _walk_back(y: np.ndarray, j: int, lo: int) -> int:
-    """Move index j back to the start of the monotone *decrease* of y that contains it (not before lo)."""
+    """Move index j back to the start of the monotone *decrease* of y that contains it (not
+    before lo)."""
     while j > lo and y[j - 1] > y[j]:
         j -= 1
     return j
@@ -69,9 +73,9 @@ def _walk_back(y: np.ndarray, j: int, lo: int) -> int:
 def _refine(t: np.ndarray, y: np.ndarray, j: int) -> float:
     """Sub-sample start of a movement that leaves level y[j] at sample j (y decreasing after j).
 
-    The line through the first two moving samples is extended back to the level y[j] (a rate-limited rudder
-    moves linearly), clamped to [t[j], t[j+1]]: on a coarsely sampled record the reversal then falls where the
-    rudder actually started, not up to one sample earlier.
+    The line through the first two moving samples is extended back to the level y[j] (a rate-limited
+    rudder moves linearly), clamped to [t[j], t[j+1]]: on a coarsely sampled record the reversal
+    then falls where the rudder actually started, not up to one sample earlier.
     """
     if j + 2 >= len(t) or not y[j + 1] > y[j + 2] or not y[j] > y[j + 1]:
         return float(t[j])
@@ -80,11 +84,12 @@ def _refine(t: np.ndarray, y: np.ndarray, j: int) -> float:
 
 
 def _fit_ramp_start(t: np.ndarray, y: np.ndarray, lo: int, hi: int, top: float, bottom: float, h: float):
-    """Noisy record: y falls from plateau ``top`` towards ``bottom`` within [lo, hi]; return the time at which
-    the least-squares line through the ramp samples (clear of both plateaus by ``h``) is at ``top``, or None.
+    """Noisy record: y falls from plateau ``top`` towards ``bottom`` within [lo, hi]; return the
+    time at which the least-squares line through the ramp samples (clear of both plateaus by ``h``)
+    is at ``top``, or None.
 
-    Sample-by-sample tests cannot find the start of a movement buried in noise; the ramp of a rate-limited
-    rudder is a straight line, and its fit locates the start to a fraction of a sample.
+    Sample-by-sample tests cannot find the start of a movement buried in noise; the ramp of a
+    rate-limited rudder is a straight line, and its fit locates the start to a fraction of a sample.
     """
     seg = y[lo:hi + 1]
     on_top = np.nonzero(seg >= top - h)[0]
@@ -105,7 +110,8 @@ def _index_at(t: np.ndarray, tq: float) -> int:
 
 
 class _RudderEvents:
-    """Execution and reversals of the rudder signal (see the module docstring for the definitions)."""
+    """Execution and reversals of the rudder signal (see the module docstring for the
+    definitions)."""
 
     def __init__(self, t: np.ndarray, delta: np.ndarray, threshold_deg: float = EXEC_THRESHOLD_DEG):
         # Measured rudder angles carry noise: raise the threshold to 6 noise sigmas (robust estimate from the
@@ -177,7 +183,8 @@ class _RudderEvents:
                 self.seg_start[0] = self.i_exec
 
     def segment_shape_ok(self, k: int, end: int, tol: float) -> bool:
-        """True if the rudder on segment k rises monotonically (within tol) to a plateau and stays on it."""
+        """True if the rudder on segment k rises monotonically (within tol) to a plateau and
+        stays on it."""
         y = self.sides[k] * self.d[self.seg_start[k]:end + 1]
         if y.size < 2:
             return True
@@ -188,7 +195,8 @@ class _RudderEvents:
 
 
 def _interp_crossing(t: np.ndarray, y: np.ndarray, level: float, start: int) -> float:
-    """Time at which y first reaches ``level`` (from below) at or after index start; NaN if never."""
+    """Time at which y first reaches ``level`` (from below) at or after index start; NaN if
+    never."""
     idx = np.nonzero(y[start:] >= level)[0]
     if idx.size == 0:
         return _NAN
@@ -212,47 +220,51 @@ def zigzag_metrics(df: pd.DataFrame, psi_switch: float | None = None, L: float |
     Definitions after IMO MSC.137(76) section 4.2 and MSC/Circ.1053 (annex, zig-zag test), and ITTC
     Recommended Procedure 7.5-04-02-01 (2017), section on the zig-zag manoeuvre:
 
-    - *overshoot angle* k: the largest heading change beyond the switch heading after the k-th rudder reversal,
-      on the side the ship was turning to, ``max(s_k (psi - psi_exec)) - psi_switch`` between reversal k and
-      reversal k+1 (or the end of the record); positive degrees;
+    - *overshoot angle* k: the largest heading change beyond the switch heading after the k-th
+      rudder reversal, on the side the ship was turning to, ``max(s_k (psi - psi_exec)) -
+      psi_switch`` between reversal k and reversal k+1 (or the end of the record); positive degrees;
     - *initial turning time*: from the first execute to the instant the heading change first reaches
       ``psi_switch`` (linear interpolation between samples);
     - *time to check yaw*: from a rudder reversal to the following heading extremum (the overshoot);
-    - *reach*: here the time from the first execute to the first heading extremum (= initial turning time +
-      time to check yaw when the rudder is reversed exactly at the switch heading), and ``reach_distance``, the
-      distance run along the initial course over that time;
-    - *period*: time between successive rudder movements in the same direction; the first is from the first
-      execute to the second reversal (a full cycle), the following ones from reversal k to reversal k+2.
+    - *reach*: here the time from the first execute to the first heading extremum (= initial turning
+      time + time to check yaw when the rudder is reversed exactly at the switch heading), and
+      ``reach_distance``, the distance run along the initial course over that time;
+    - *period*: time between successive rudder movements in the same direction; the first is from
+      the first execute to the second reversal (a full cycle), the following ones from reversal k to
+      reversal k+2.
 
-    One function: these standard definitions are computed in turn from the same rudder events and heading change.
+    One function: these standard definitions are computed in turn from the same rudder events and
+    heading change.
 
     Parameters
     ----------
     df : DataFrame
-        Record with ``time`` [s], ``delta`` [rad], ``psi`` [rad, unwrapped]; ``x0``, ``y0`` [m] for the reach
+        Record with ``time`` [s], ``delta`` [rad], ``psi`` [rad, unwrapped]; ``x0``, ``y0`` [m] for
+        the reach
         distance.
     psi_switch : float, optional
-        Switch heading change in **radians** (magnitude, e.g. ``math.radians(10)`` for a 20/10 zigzag). When
-        omitted it is inferred as the heading change at the first rudder reversal (exact for a simulated
-        controller; for manual steering it includes the helmsman's delay).
+        Switch heading change in **radians** (magnitude, e.g. ``math.radians(10)`` for a 20/10
+        zigzag). When omitted it is inferred as the heading change at the first rudder reversal
+        (exact for a simulated controller; for manual steering it includes the helmsman's delay).
     L : float, optional
         Ship length [m]; adds ``reach_distance_L``.
 
     Returns
     -------
     dict
-        Scalars: ``side`` (+1 starboard first, -1 port first), ``execution_time`` [s], ``psi_switch_deg``,
-        ``psi_switch_inferred`` (1.0/0.0), ``delta_amplitude_deg``, ``n_reversals``, ``overshoot_1``,
-        ``overshoot_2``, ``overshoot_3`` [deg], ``initial_turning_time``, ``time_to_check_yaw``, ``reach``,
-        ``period`` (mean of ``periods``) [s], ``reach_distance`` [m]. Lists: ``switch_times`` [s, record time],
-        ``overshoots`` [deg], ``overshoot_times`` [s, record time], ``check_yaw_times`` [s], ``periods`` [s].
-        NaN where the record is too short.
+        Scalars: ``side`` (+1 starboard first, -1 port first), ``execution_time`` [s],
+        ``psi_switch_deg``, ``psi_switch_inferred`` (1.0/0.0), ``delta_amplitude_deg``,
+        ``n_reversals``, ``overshoot_1``, ``overshoot_2``, ``overshoot_3`` [deg],
+        ``initial_turning_time``, ``time_to_check_yaw``, ``reach``, ``period`` (mean of ``periods``)
+        [s], ``reach_distance`` [m]. Lists: ``switch_times`` [s, record time], ``overshoots`` [deg],
+        ``overshoot_times`` [s, record time], ``check_yaw_times`` [s], ``periods`` [s]. NaN where
+        the record is too short.
 
     Raises
     ------
     ValueError
-        Missing columns, no rudder execution, no rudder reversal, or a reversal with the heading on the wrong
-        side of the initial course.
+        Missing columns, no rudder execution, no rudder reversal, or a reversal with the heading on
+        the wrong side of the initial course.
     """
     c = _columns(df, ("time", "delta", "psi"), "zigzag_metrics")
     t, psi = c["time"], c["psi"]
@@ -330,7 +342,8 @@ def zigzag_metrics(df: pd.DataFrame, psi_switch: float | None = None, L: float |
 # turning circle
 # --------------------------------------------------------------------------------------------------------------
 def _fit_circle(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
-    """Algebraic least-squares circle (Kasa 1976): returns (xc, yc, R). Exact for points on a circle."""
+    """Algebraic least-squares circle (Kasa 1976): returns (xc, yc, R). Exact for points on a
+    circle."""
     xm, ym = x.mean(), y.mean()
     X, Y = x - xm, y - ym  # centred for conditioning (positions can be kilometres from the origin)
     A = np.column_stack([X, Y, np.ones_like(X)])
@@ -344,26 +357,28 @@ def _fit_circle(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
 def turning_metrics(df: pd.DataFrame, L: float | None = None, steady_tol: float = 0.02) -> dict:
     """Turning-circle characteristics.
 
-    Definitions after IMO MSC.137(76) sections 2.3.2-2.3.4 and 4.1 (advance, tactical diameter), MSC/Circ.1053
-    (transfer, steady turning diameter, speed loss) and ITTC Recommended Procedure 7.5-04-02-01 (turning
-    circle test). Origin: position and heading at rudder execution (see the module docstring); distances are
-    those of the record's reference point (midship for MMG records).
+    Definitions after IMO MSC.137(76) sections 2.3.2-2.3.4 and 4.1 (advance, tactical diameter),
+    MSC/Circ.1053 (transfer, steady turning diameter, speed loss) and ITTC Recommended Procedure
+    7.5-04-02-01 (turning circle test). Origin: position and heading at rudder execution (see the
+    module docstring); distances are those of the record's reference point (midship for MMG
+    records).
 
-    - *advance*: distance along the initial course from the execution to the point where the heading has
-      changed by 90 deg; *transfer*: the distance perpendicular to the initial course (towards the turn) at that
-      point; *tactical diameter*: the perpendicular distance at 180 deg heading change. Crossing instants are
-      linearly interpolated between samples.
-    - *steady turn*: the last contiguous stretch before the pull-out (the rudder leaving its turning angle) or
-      the end of the record on which the smoothed yaw rate stays within ``steady_tol`` (relative) of its mean
-      over the last 30 % of the turn. *Steady turning rate* = mean |r| there; *speed loss ratio* = mean U there
-      over the mean U before execution; *drift angle* ``beta = atan2(-v, u)`` (MMG sign, positive when the bow
-      points into the turn) times the side, mean over the steady part.
-    - *steady turning diameter*: a least-squares circle through the steady positions when the steady stretch
-      covers at least 90 deg of heading (well-conditioned fit), else ``2 U / |r|``; ``2 U / |r|`` is always
-      given as ``steady_turning_diameter_Ur``.
+    - *advance*: distance along the initial course from the execution to the point where the heading
+      has changed by 90 deg; *transfer*: the distance perpendicular to the initial course (towards
+      the turn) at that point; *tactical diameter*: the perpendicular distance at 180 deg heading
+      change. Crossing instants are linearly interpolated between samples.
+    - *steady turn*: the last contiguous stretch before the pull-out (the rudder leaving its turning
+      angle) or the end of the record on which the smoothed yaw rate stays within ``steady_tol``
+      (relative) of its mean over the last 30 % of the turn. *Steady turning rate* = mean |r| there;
+      *speed loss ratio* = mean U there over the mean U before execution; *drift angle* ``beta =
+      atan2(-v, u)`` (MMG sign, positive when the bow points into the turn) times the side, mean
+      over the steady part.
+    - *steady turning diameter*: a least-squares circle through the steady positions when the steady
+      stretch covers at least 90 deg of heading (well-conditioned fit), else ``2 U / |r|``; ``2 U /
+      |r|`` is always given as ``steady_turning_diameter_Ur``.
 
-    One function: these standard definitions are computed in turn from the same execution instant, turn side and
-    track in the initial course's axes.
+    One function: these standard definitions are computed in turn from the same execution instant,
+    turn side and track in the initial course's axes.
 
     Parameters
     ----------
@@ -380,11 +395,11 @@ def turning_metrics(df: pd.DataFrame, L: float | None = None, steady_tol: float 
     dict of floats
         ``side`` (+1 starboard, -1 port), ``execution_time``, ``approach_speed`` [m/s], ``advance``,
         ``transfer``, ``tactical_diameter`` [m], ``time_90``, ``time_180`` [s from execution],
-        ``steady_turning_diameter``, ``steady_turning_diameter_Ur`` [m], ``steady_turning_rate`` [rad/s],
-        ``steady_turning_rate_deg`` [deg/s], ``steady_speed`` [m/s], ``speed_loss_ratio``, ``drift_angle``
-        [rad], ``drift_angle_deg``, ``steady_start_time``, ``steady_end_time`` [s]. Turn-dependent quantities
-        are positive for both port and starboard turns. NaN where the record is too short (e.g. heading never
-        reaches 180 deg, or no steady stretch).
+        ``steady_turning_diameter``, ``steady_turning_diameter_Ur`` [m], ``steady_turning_rate``
+        [rad/s], ``steady_turning_rate_deg`` [deg/s], ``steady_speed`` [m/s], ``speed_loss_ratio``,
+        ``drift_angle`` [rad], ``drift_angle_deg``, ``steady_start_time``, ``steady_end_time`` [s].
+        Turn-dependent quantities are positive for both port and starboard turns. NaN where the
+        record is too short (e.g. heading never reaches 180 deg, or no steady stretch).
 
     Raises
     ------
@@ -475,13 +490,14 @@ def prediction_metrics(measured_df: pd.DataFrame, predicted_df: pd.DataFrame,
                        channels=("u", "v", "r", "psi")) -> dict:
     """Accuracy of a predicted trajectory against a measured one.
 
-    The predicted record is linearly interpolated onto the measured time stamps that lie within its time span
-    (so records with dropouts or a different step compare sample by sample). Per channel ``c``: ``rmse_c``,
-    ``nrmse_c`` (RMSE over the standard deviation of the measured channel; NaN if that is 0),
-    ``max_abs_error_c`` and ``cc_c`` (Pearson correlation coefficient; NaN if either signal is constant) --
-    the RMSE and CC of seed paper 000 (Song et al. 2025, Table 4). Track: ``track_rmse`` (RMS of the horizontal
-    position error) and ``final_position_error`` (at the last common time), in metres, when both records have
-    ``x0`` and ``y0``. Units are those of the channels (SI, radians for ``psi``).
+    The predicted record is linearly interpolated onto the measured time stamps that lie within its
+    time span (so records with dropouts or a different step compare sample by sample). Per channel
+    ``c``: ``rmse_c``, ``nrmse_c`` (RMSE over the standard deviation of the measured channel; NaN if
+    that is 0), ``max_abs_error_c`` and ``cc_c`` (Pearson correlation coefficient; NaN if either
+    signal is constant) -- the RMSE and CC of seed paper 000 (Song et al. 2025, Table 4). Track:
+    ``track_rmse`` (RMS of the horizontal position error) and ``final_position_error`` (at the last
+    common time), in metres, when both records have ``x0`` and ``y0``. Units are those of the
+    channels (SI, radians for ``psi``).
 
     Raises
     ------
@@ -530,13 +546,14 @@ def prediction_metrics(measured_df: pd.DataFrame, predicted_df: pd.DataFrame,
 # dispatch
 # --------------------------------------------------------------------------------------------------------------
 def detect_maneuver(df: pd.DataFrame) -> str:
-    """Guess the manoeuvre of a record from its rudder signal: ``'zigzag'``, ``'turning'`` or ``'other'``.
+    """Guess the manoeuvre of a record from its rudder signal: ``'zigzag'``, ``'turning'`` or
+    ``'other'``.
 
-    - zigzag: at least one rudder reversal; at every reversal the heading change is on the side of the rudder
-      being reversed and of a size within a factor 3 of the first one (the switch heading); on every leg the
-      rudder goes to one plateau and stays there (IMO MSC.137(76) 4.2).
-    - turning: no reversal; the rudder goes to one angle and holds it, optionally back towards midship once
-      (pull-out) and stays there (IMO MSC.137(76) 4.1).
+    - zigzag: at least one rudder reversal; at every reversal the heading change is on the side of
+      the rudder being reversed and of a size within a factor 3 of the first one (the switch
+      heading); on every leg the rudder goes to one plateau and stays there (IMO MSC.137(76) 4.2).
+    - turning: no reversal; the rudder goes to one angle and holds it, optionally back towards
+      midship once (pull-out) and stays there (IMO MSC.137(76) 4.1).
     - other: anything else (random rudder, no rudder execution, ...).
     """
     c = _columns(df, ("time", "delta", "psi"), "detect_maneuver")
@@ -570,9 +587,10 @@ def detect_maneuver(df: pd.DataFrame) -> str:
 def standard_metrics(df: pd.DataFrame, L: float | None = None) -> dict:
     """The standard metrics that apply to a record, chosen by :func:`detect_maneuver`.
 
-    Returns ``{'maneuver': kind, **metrics}``: :func:`zigzag_metrics` (switch heading inferred) for a zigzag,
-    :func:`turning_metrics` for a turning circle, nothing else for ``'other'``. Raises ValueError (from the
-    metric) when the record looks like a zigzag or turning circle but cannot carry the metric.
+    Returns ``{'maneuver': kind, **metrics}``: :func:`zigzag_metrics` (switch heading inferred) for
+    a zigzag, :func:`turning_metrics` for a turning circle, nothing else for ``'other'``. Raises
+    ValueError (from the metric) when the record looks like a zigzag or turning circle but cannot
+    carry the metric.
     """
     kind = detect_maneuver(df)
     if kind == "zigzag":

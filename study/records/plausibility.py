@@ -1,38 +1,47 @@
-"""Plausibility checks of a record against itself: do its channels agree with each other in the schema's units?
+"""Plausibility checks of a record against itself: do its channels agree with each other in the
+schema's units?
 
-``study.records.schema.validate`` runs these after the structural checks (columns, NaN, time order, limits). Each finding
-names the column, the row where it applies, what was found and the likely fix; ``validate`` adds the file.
+``study.records.schema.validate`` runs these after the structural checks (columns, NaN, time order,
+limits). Each finding names the column, the row where it applies, what was found and the likely fix;
+``validate`` adds the file.
 
-The channels of a record are redundant: the heading is the integral of the yaw rate, the track the integral of
-the body velocities turned by the heading, the course of the track the heading plus the drift angle. A unit
-mistake breaks that redundancy by a known factor (degrees: 57.3, milliseconds: 1000, knots: 1.944...), which
-the checks recognise:
+The channels of a record are redundant: the heading is the integral of the yaw rate, the track the
+integral of the body velocities turned by the heading, the course of the track the heading plus the
+drift angle. A unit mistake breaks that redundancy by a known factor (degrees: 57.3, milliseconds:
+1000, knots: 1.944...), which the checks recognise:
 
-1. **yaw rate against heading**: over windows of the record, the change of ``psi`` against the integral of
-   ``r``; their ratio is 1 in the schema's units, 57.3 with the heading in degrees, 1/57.3 with the yaw rate in
-   deg/s (which the schema's limit of 2 rad/s misses below 2 deg/s: every full-scale ship);
-2. **heading against the track's course**: the change of the course over ground (direction of the track's
-   displacement over a window, from ``x0, y0``) less the drift angle ``atan2(v, u)`` against the change of
-   ``psi``; catches a heading and a yaw rate both in degrees (their ratio is then 1);
-3. **body velocities against the track**: the displacement of ``x0, y0`` over each window against the integral
-   of ``(u, v)`` turned by ``psi``; 1 in the schema's units, 1/1000 with time in milliseconds (then check 1 says
-   1/1000 too), 1/1.944 with speeds in knots, 1/3.6 in km/h, 1/1000 with positions in km;
-4. **time units from the sample interval**: a median interval above 5 "seconds" (records for identification
-   are sampled at 0.01-1 s) is named as probably milliseconds when no check above confirms or refutes it;
-5. **position jumps**: a step of ``x0, y0`` that the velocities do not explain, by far more than the track's
-   own scatter: a single step that stays (two records joined end to end) or a spike that returns (a position
+1. **yaw rate against heading**: over windows of the record, the change of ``psi`` against the
+   integral of ``r``; their ratio is 1 in the schema's units, 57.3 with the heading in degrees,
+   1/57.3 with the yaw rate in deg/s (which the schema's limit of 2 rad/s misses below 2 deg/s:
+   every full-scale ship);
+2. **heading against the track's course**: the change of the course over ground (direction of the
+   track's displacement over a window, from ``x0, y0``) less the drift angle ``atan2(v, u)`` against
+   the change of ``psi``; catches a heading and a yaw rate both in degrees (their ratio is then 1);
+3. **body velocities against the track**: the displacement of ``x0, y0`` over each window against
+   the integral of ``(u, v)`` turned by ``psi``; 1 in the schema's units, 1/1000 with time in
+   milliseconds (then check 1 says 1/1000 too), 1/1.944 with speeds in knots, 1/3.6 in km/h, 1/1000
+   with positions in km;
+4. **time units from the sample interval**: a median interval above 5 "seconds" (records for
+   identification are sampled at 0.01-1 s) is named as probably milliseconds when no check above
+   confirms or refutes it;
+5. **position jumps**: a step of ``x0, y0`` that the velocities do not explain, by far more than the
+   track's own scatter: a single step that stays (two records joined end to end) or a spike that
+   returns (a position
    glitch);
-6. **constant channels**: a motion or rudder channel with one value throughout (a sensor not logged);
-7. **mirrored track**: the track's course does not follow the heading, but does with ``x0`` and ``y0`` exchanged
-   (check 2 on the mirrored track): the columns swapped, or a heading counted anticlockwise; judged from positions
-   and heading (and ``u, v`` where given), so it holds for records whose ``u, v, r`` are to be estimated.
+6. **constant channels**: a motion or rudder channel with one value throughout (a sensor not
+   logged);
+7. **mirrored track**: the track's course does not follow the heading, but does with ``x0`` and
+   ``y0`` exchanged (check 2 on the mirrored track): the columns swapped, or a heading counted
+   anticlockwise; judged from positions and heading (and ``u, v`` where given), so it holds for
+   records whose ``u, v, r`` are to be estimated.
 
-A ratio is judged only where the record says it clearly: enough windows, enough change, and a fit that explains
-at least :data:`MIN_FIT` of the windows' squared increments. A ratio within :data:`UNIT_TOLERANCE` of a unit
-factor is an **error** (the mistake is certain, the fix is named); any other ratio outside :data:`AGREE` is a
-**warning** (a suspicion: a calibration, a current, water-relative velocities, a different reference point).
-The thresholds were set on every real record of ``../shared/data/real`` (HSVA's KVLCC2 and Osaka University's
-Esso Osaka: all pass without a finding) and on simulated records of every vessel at every noise definition
+A ratio is judged only where the record says it clearly: enough windows, enough change, and a fit
+that explains at least :data:`MIN_FIT` of the windows' squared increments. A ratio within
+:data:`UNIT_TOLERANCE` of a unit factor is an **error** (the mistake is certain, the fix is named);
+any other ratio outside :data:`AGREE` is a **warning** (a suspicion: a calibration, a current,
+water-relative velocities, a different reference point). The thresholds were set on every real
+record of ``../shared/data/real`` (HSVA's KVLCC2 and Osaka University's Esso Osaka: all pass without
+a finding) and on simulated records of every vessel at every noise definition
 (``tests/records/test_plausibility.py``); their reasons are in ``docs/schema.md``.
 """
 from __future__ import annotations
@@ -115,8 +124,8 @@ class Finding:
 
 @dataclass(frozen=True)
 class Ratio:
-    """A fitted ratio reference increment / rate integral over windows, with its fit and support, and the rows of
-    the window that departs most from ratio 1 (where to look)."""
+    """A fitted ratio reference increment / rate integral over windows, with its fit and support,
+    and the rows of the window that departs most from ratio 1 (where to look)."""
 
     k: float
     fit: float
@@ -133,7 +142,8 @@ def _g(x: float) -> str:
 
 
 def windows(n: int) -> np.ndarray:
-    """Window boundaries (indices) splitting ``n`` samples into about WINDOW_SAMPLES-sample windows."""
+    """Window boundaries (indices) splitting ``n`` samples into about WINDOW_SAMPLES-sample
+    windows."""
     m = int(np.clip(n // WINDOW_SAMPLES, MIN_WINDOWS, MAX_WINDOWS))
     m = max(1, min(m, n - 1))
     return np.unique(np.round(np.linspace(0, n - 1, m + 1)).astype(int))
@@ -146,8 +156,9 @@ def _cumtrapz(y: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def fit_ratio(D: np.ndarray, I: np.ndarray, starts=None, ends=None) -> Ratio:
-    """k of D = k I through the origin (D, I: increments per window; rows may be 2-vectors), with the fraction of
-    sum |D|^2 it explains; ``starts``, ``ends``: the windows' first and last rows."""
+    """k of D = k I through the origin (D, I: increments per window; rows may be 2-vectors), with
+    the fraction of sum |D|^2 it explains; ``starts``, ``ends``: the windows' first and last
+    rows."""
     D = np.asarray(D, float).reshape(len(D), -1)
     I = np.asarray(I, float).reshape(len(I), -1)
     ii, dd = float(np.sum(I * I)), float(np.sum(D * D))
@@ -174,9 +185,10 @@ def _agrees(k: float) -> bool:
 
 
 def ratios(df: pd.DataFrame) -> dict:
-    """The record's three ratios (``r``: heading change / integral of r; ``uv``: track displacement / integral of
-    the turned velocities; ``course``: change of the track's course less the drift angle / change of psi), what
-    the velocities miss of the track along and across the heading (``missed``), and the window boundaries."""
+    """The record's three ratios (``r``: heading change / integral of r; ``uv``: track
+    displacement / integral of the turned velocities; ``course``: change of the track's course
+    less the drift angle / change of psi), what the velocities miss of the track along and across
+    the heading (``missed``), and the window boundaries."""
     t = df["time"].to_numpy(float)
     psi = df["psi"].to_numpy(float)
     u, v, r = (df[c].to_numpy(float) for c in ("u", "v", "r"))
@@ -218,9 +230,9 @@ def _at(R: Ratio) -> str:
 
 
 def _time_unit(kr: Ratio, kuv: Ratio, h: float):
-    """(factor, what, fix) when the track and the yaw rate both say the time is in other units, else None. The
-    track alone (ratio 1/1000) could also be positions in km: then the yaw rate decides, or without a turn the
-    sample interval (above 1 'second' with 1/1000: milliseconds)."""
+    """(factor, what, fix) when the track and the yaw rate both say the time is in other units,
+    else None. The track alone (ratio 1/1000) could also be positions in km: then the yaw rate
+    decides, or without a turn the sample interval (above 1 'second' with 1/1000: milliseconds)."""
     for R in (kuv, kr):
         m = _match(R.k, TIME_FACTORS) if R.judged else None
         if m is None:
@@ -307,9 +319,10 @@ def check(df: pd.DataFrame) -> list[Finding]:
 
 
 def _mirrored(kc: Ratio, km: Ratio) -> Finding | None:
-    """The finding of a mirrored track (check 7) from the course ratios of the track and of the exchanged track.
-    Only the sign is judged: without u, v (states to be estimated) the drift's changes are left in the course,
-    which lowers the fit and the ratio (0.84, fit 0.86 on a KVLCC2 20/20 zigzag) but never turns its sign."""
+    """The finding of a mirrored track (check 7) from the course ratios of the track and of the
+    exchanged track. Only the sign is judged: without u, v (states to be estimated) the drift's
+    changes are left in the course, which lowers the fit and the ratio (0.84, fit 0.86 on a
+    KVLCC2 20/20 zigzag) but never turns its sign."""
     if km.windows >= MIN_WINDOWS // 2 and km.fit >= MIRROR_FIT and km.k > MIRROR_RATIO and kc.k < 0:
         return Finding("error", "x0", km.rows[0],
                        f"columns 'x0', 'y0': the track's course turns against psi (its change is {_g(kc.k)} "
@@ -320,8 +333,9 @@ def _mirrored(kc: Ratio, km: Ratio) -> Finding | None:
 
 
 def mirrored_track(df: pd.DataFrame) -> Finding | None:
-    """Check 7 alone, from positions and heading (``u, v`` taken as zero where absent): for a record whose
-    ``u, v, r`` are still to be estimated from its track, which a mirrored track would corrupt."""
+    """Check 7 alone, from positions and heading (``u, v`` taken as zero where absent): for a
+    record whose ``u, v, r`` are still to be estimated from its track, which a mirrored track
+    would corrupt."""
     cols = {c: 0.0 for c in ("u", "v", "r") if c not in df.columns}
     q = ratios(df.assign(**cols) if cols else df)
     return _mirrored(q["course"], q["course_mirrored"])

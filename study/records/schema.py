@@ -1,8 +1,9 @@
 """The schema of a measured (or simulated) manoeuvring record, its validation, reading and writing.
 
-One record = one manoeuvre = one table, SI units and radians, frames and signs of ``docs/conventions.md``.
-The column specification below is the single source of truth: validation and ``docs/schema.md`` follow it.
-Every error names the file and the problem, so a user with a bad file knows what to fix.
+One record = one manoeuvre = one table, SI units and radians, frames and signs of
+``docs/conventions.md``. The column specification below is the single source of truth: validation
+and ``docs/schema.md`` follow it. Every error names the file and the problem, so a user with a bad
+file knows what to fix.
 """
 from __future__ import annotations
 
@@ -61,8 +62,8 @@ class SchemaError(ValueError):
 
 
 class RecordWarning(UserWarning):
-    """A record that follows the schema but looks implausible (``study.records.plausibility``); the message names the file,
-    the column, where, and what to check."""
+    """A record that follows the schema but looks implausible (``study.records.plausibility``);
+    the message names the file, the column, where, and what to check."""
 
 
 #: what ``validate`` does with the plausibility checks of ``study.records.plausibility``: ``error`` (a certain unit mistake
@@ -71,7 +72,8 @@ PLAUSIBILITY = ("error", "warn", "off")
 
 
 def not_utf8(path, exc: UnicodeDecodeError) -> SchemaError:
-    """The one-line error of a text file that is not UTF-8 (a Latin-1 / Windows-1252 export, typically)."""
+    """The one-line error of a text file that is not UTF-8 (a Latin-1 / Windows-1252 export,
+    typically)."""
     byte = exc.object[exc.start:exc.start + 1].hex() if isinstance(exc.object, (bytes, bytearray)) else "?"
     return SchemaError(f"{path}: not UTF-8 text (byte 0x{byte} at position {exc.start}; a Latin-1 or Windows-1252 "
                        f"export?): re-save it as UTF-8, e.g. iconv -f latin1 -t utf-8 old.csv > new.csv")
@@ -109,13 +111,14 @@ ESTIMATOR_INPUTS = ("x0", "y0", "psi")
 
 def validate(df: pd.DataFrame, path=None, min_samples: int = 20, hint: str = "",
              plausibility: str = "error") -> None:
-    """Raise :class:`SchemaError` if ``df`` is not a valid record; extra columns are allowed and kept.
-    ``hint``: appended to the message of missing columns (how else the record could be read).
+    """Raise :class:`SchemaError` if ``df`` is not a valid record; extra columns are allowed and
+    kept. ``hint``: appended to the message of missing columns (how else the record could be read).
 
-    Then the plausibility checks of ``study.records.plausibility`` (do the channels agree with each other in the
-    schema's units?): with ``plausibility="error"`` a certain unit mistake (degrees, deg/s, milliseconds, knots,
-    two records joined) raises :class:`SchemaError` and a suspicion warns (:class:`RecordWarning`); ``"warn"``
-    turns every finding into a warning, ``"off"`` skips them."""
+    Then the plausibility checks of ``study.records.plausibility`` (do the channels agree with
+    each other in the schema's units?): with ``plausibility="error"`` a certain unit mistake
+    (degrees, deg/s, milliseconds, knots, two records joined) raises :class:`SchemaError` and a
+    suspicion warns (:class:`RecordWarning`); ``"warn"`` turns every finding into a warning,
+    ``"off"`` skips them."""
     if plausibility not in PLAUSIBILITY:
         raise ValueError(f"validate: plausibility={plausibility!r}; expected one of {list(PLAUSIBILITY)}")
     where = _where(path)
@@ -173,8 +176,8 @@ def validate(df: pd.DataFrame, path=None, min_samples: int = 20, hint: str = "",
 
 def check_meta(meta: dict, path=None) -> None:
     """Metadata keys with a fixed vocabulary: ``facility`` (where the record was measured: one of
-    ``study.records.facility.FACILITIES``). An unknown value raises :class:`SchemaError` naming the file, the key, the value
-    and what was expected."""
+    ``study.records.facility.FACILITIES``). An unknown value raises :class:`SchemaError` naming
+    the file, the key, the value and what was expected."""
     from study.records.facility import check
 
     if "facility" in (meta or {}):
@@ -201,8 +204,9 @@ _DECIMAL_COMMA = re.compile(r"\d,\d")
 
 
 def _csv_hint(body: list) -> str:
-    """Why a CSV table cannot be split into its header's columns (empty when it can): rows with more fields than
-    the header (quoted fields counted as one), most likely numbers written with a decimal comma."""
+    """Why a CSV table cannot be split into its header's columns (empty when it can): rows with
+    more fields than the header (quoted fields counted as one), most likely numbers written with
+    a decimal comma."""
     import csv
 
     if not body:
@@ -228,21 +232,24 @@ def read_record(path, min_samples: int = 20, states: str = "measured", state_opt
 
     ``states`` says where the body velocities ``u, v, r`` come from:
 
-    - ``"measured"`` (default): the record must have them (a missing one is an error naming the file and the
-      column, and mentioning this option);
-    - ``"auto"``: a record without (some of) ``u, v, r`` but with positions ``x0, y0`` and heading ``psi`` gets
-      them estimated by the extended Kalman filter and RTS smoother of ``study.records.state_estimation``
-      (those it has are used as measurements and refined); a record that has all three is read as measured;
+    - ``"measured"`` (default): the record must have them (a missing one is an error naming the file
+      and the column, and mentioning this option);
+    - ``"auto"``: a record without (some of) ``u, v, r`` but with positions ``x0, y0`` and heading
+      ``psi`` gets them estimated by the extended Kalman filter and RTS smoother of
+      ``study.records.state_estimation`` (those it has are used as measurements and refined); a
+      record that has all three is read as measured;
     - ``"ekf"``: always estimated (measured ``u, v, r`` refined).
 
-    An estimated record has ``u, v, r`` replaced (or added after ``time``) and ``u_dot, v_dot, r_dot`` added
-    (positions and heading stay as measured), and its metadata say so: ``meta["states"] = "ekf"``,
-    ``meta["state_estimation"]`` the filter's settings (noise standard deviations, process noise, how each was
-    chosen). ``state_options``: the estimator's options (``state_estimation.DEFAULTS``: absolute standard
-    deviations ``position_std`` [m], ``heading_std`` [rad], ``u_std``, ``v_std`` [m/s], ``r_std`` [rad/s], or
-    ``"auto"``; ``process``). ``plausibility``: as in :func:`validate`.
+    An estimated record has ``u, v, r`` replaced (or added after ``time``) and ``u_dot, v_dot,
+    r_dot`` added (positions and heading stay as measured), and its metadata say so:
+    ``meta["states"] = "ekf"``, ``meta["state_estimation"]`` the filter's settings (noise standard
+    deviations, process noise, how each was chosen). ``state_options``: the estimator's options
+    (``state_estimation.DEFAULTS``: absolute standard deviations ``position_std`` [m],
+    ``heading_std`` [rad], ``u_std``, ``v_std`` [m/s], ``r_std`` [rad/s], or ``"auto"``;
+    ``process``). ``plausibility``: as in :func:`validate`.
 
-    CSV files are UTF-8 (a byte-order mark is skipped); another encoding is an error naming the file and the fix.
+    CSV files are UTF-8 (a byte-order mark is skipped); another encoding is an error naming the file
+    and the fix.
     """
     if states not in STATES:
         raise ValueError(f"read_record: states='{states}'; expected one of {list(STATES)}")
@@ -321,8 +328,9 @@ def with_estimated_states(record: Record, state_options: dict | None = None, min
 
 def _estimate_states(df: pd.DataFrame, meta: dict, path, min_samples: int, lacking: list,
                      state_options: dict | None, plausibility: str = "error") -> tuple[pd.DataFrame, dict]:
-    """The record with u, v, r (and u_dot, v_dot, r_dot) from the state estimator; validated before (with
-    stand-ins for the missing u, v, r, so that every other problem gets its usual message) and after."""
+    """The record with u, v, r (and u_dot, v_dot, r_dot) from the state estimator; validated
+    before (with stand-ins for the missing u, v, r, so that every other problem gets its usual
+    message) and after."""
     need = [c for c in ESTIMATOR_INPUTS if c not in df.columns]
     if need:
         validate(df, path, min_samples=min_samples,
@@ -359,7 +367,8 @@ def _estimate_states(df: pd.DataFrame, meta: dict, path, min_samples: int, lacki
 
 
 def write_record(record: Record, path, overwrite: bool = False) -> Path:
-    """Validate and write a record atomically; an existing file is never replaced unless ``overwrite``."""
+    """Validate and write a record atomically; an existing file is never replaced unless
+    ``overwrite``."""
     path = Path(path)
     ext = path.suffix.lower()
     if ext not in SUPPORTED:
@@ -395,9 +404,10 @@ def write_record(record: Record, path, overwrite: bool = False) -> Path:
 
 
 def _create_exclusively(tmp: Path, path: Path) -> None:
-    """Give the finished ``tmp`` the name ``path`` only if nothing has that name: of two processes writing the
-    same file, one wins and the other gets ``FileExistsError`` (a hard link is created atomically and never
-    replaces; ``os.replace`` would silently let the second writer's file replace the first's)."""
+    """Give the finished ``tmp`` the name ``path`` only if nothing has that name: of two
+    processes writing the same file, one wins and the other gets ``FileExistsError`` (a hard link
+    is created atomically and never replaces; ``os.replace`` would silently let the second
+    writer's file replace the first's)."""
     try:
         os.link(tmp, path)
     except FileExistsError:
@@ -411,8 +421,8 @@ def _create_exclusively(tmp: Path, path: Path) -> None:
 
 def read_records(spec, min_samples: int = 20, states: str = "measured",
                  state_options: dict | None = None, plausibility: str = "error") -> list[Record]:
-    """Records from a file, a folder (every .csv/.parquet inside, sorted) or a glob pattern; ``states``,
-    ``state_options`` and ``plausibility`` as in :func:`read_record`."""
+    """Records from a file, a folder (every .csv/.parquet inside, sorted) or a glob pattern;
+    ``states``, ``state_options`` and ``plausibility`` as in :func:`read_record`."""
     if states not in STATES:
         raise ValueError(f"read_records: states='{states}'; expected one of {list(STATES)}")
     p = Path(str(spec)).expanduser()

@@ -1,25 +1,27 @@
-"""Plausibility checks of records against the vessel, run on every training and validation record before the
-model doctor or a run on files (``study.run.records_run``) fits anything.
+"""Plausibility checks of records against the vessel, run on every training and validation record
+before the model doctor or a run on files (``study.run.records_run``) fits anything.
 
-The schema (``study.records.schema.validate``) checks what a record can say about itself (columns, NaN, time, degrees
-for radians). What needs the vessel is checked here:
+The schema (``study.records.schema.validate``) checks what a record can say about itself (columns,
+NaN, time, degrees for radians). What needs the vessel is checked here:
 
 1. **rudder sign**: by the project's convention ``delta > 0`` turns the ship to starboard (r > 0,
-   ``docs/conventions.md``). The sign of the vessel's own steady yaw response to the rudder, and its response
-   time, come from a short simulation of the vessel (a 10 deg rudder step, cached per vessel); the record's
-   sign is the sign of the correlation of ``delta`` with ``r`` one response time later. It is only judged with
-   enough rudder motion and a clear correlation; otherwise nothing is said.
-2. **speed against the vessel's scale**: the record's operating speed over ground (95th percentile: a
-   manoeuvre loses speed, so the median would not do) against the vessel's U0; far outside, with a ratio near
-   sqrt(scale) of a plausible model scale, a full-scale record for a model-scale vessel (or the reverse) is
-   named, with the vessel config of the same hull at the other scale if ``conf/vessel/`` has one, else the
-   Froude scaling.
+   ``docs/conventions.md``). The sign of the vessel's own steady yaw response to the rudder, and its
+   response time, come from a short simulation of the vessel (a 10 deg rudder step, cached per
+   vessel); the record's sign is the sign of the correlation of ``delta`` with ``r`` one response
+   time later. It is only judged with enough rudder motion and a clear correlation; otherwise
+   nothing is said.
+2. **speed against the vessel's scale**: the record's operating speed over ground (95th percentile:
+   a manoeuvre loses speed, so the median would not do) against the vessel's U0; far outside, with a
+   ratio near sqrt(scale) of a plausible model scale, a full-scale record for a model-scale vessel
+   (or the reverse) is named, with the vessel config of the same hull at the other scale if
+   ``conf/vessel/`` has one, else the Froude scaling.
 3. **propeller speed**: the record's operating ``n`` (95th percentile) against the vessel's own n
    (``load_vessel(cfg).n0``); rpm for rps (a ratio near 60) is named. Skipped for vessels without a
    propeller speed (n0 = 0), the waterjet (its ``n`` is a jet velocity) and the Nomoto kind.
 
-``check_records`` returns one line per problem, each naming the file, the column, the value found, what was
-expected and the likely fix; with ``strict=True`` it raises :class:`RecordCheckError` listing them.
+``check_records`` returns one line per problem, each naming the file, the column, the value found,
+what was expected and the likely fix; with ``strict=True`` it raises :class:`RecordCheckError`
+listing them.
 """
 from __future__ import annotations
 
@@ -80,8 +82,8 @@ N_SKIP_KINDS = ("waterjet", "nomoto")
 
 
 class RecordCheckError(ValueError):
-    """Records that fail a plausibility check; ``problems`` holds one line per problem (the first is the first
-    line of the message)."""
+    """Records that fail a plausibility check; ``problems`` holds one line per problem (the first
+    is the first line of the message)."""
 
     def __init__(self, problems):
         self.problems = list(problems)
@@ -122,8 +124,8 @@ def _key(cfg: dict) -> str:
 
 
 def vessel_facts(vessel_cfg) -> VesselFacts:
-    """The vessel's name, kind, scale, L, U0, n0, and its yaw response to a rudder step (simulated once per
-    vessel config and cached)."""
+    """The vessel's name, kind, scale, L, U0, n0, and its yaw response to a rudder step
+    (simulated once per vessel config and cached)."""
     cfg = _plain(vessel_cfg)
     key = _key(cfg)
     if key in _FACTS:
@@ -175,8 +177,8 @@ def _other_configs() -> list:
 
 
 def _same_hull_at_speed(vessel_cfg: dict, facts: VesselFacts, speed: float) -> list:
-    """Configs of the same hull (equal non-dimensional coefficients: the same ship at another scale) whose U0
-    is within SUGGEST_SPEED_FACTOR of ``speed``."""
+    """Configs of the same hull (equal non-dimensional coefficients: the same ship at another
+    scale) whose U0 is within SUGGEST_SPEED_FACTOR of ``speed``."""
     hull = _key(vessel_cfg.get("hull") or vessel_cfg.get("nomoto"))
     out = []
     for name, kind, L, U0, h in _other_configs():
@@ -204,8 +206,8 @@ def _operating(x: np.ndarray) -> float:
 
 
 def _check_speed(where, df, facts: VesselFacts, cfg: dict):
-    """(problem or None, Froude speed factor of the record against the vessel: 1 when the speed is plausible,
-    else the record's operating speed over U0)."""
+    """(problem or None, Froude speed factor of the record against the vessel: 1 when the speed
+    is plausible, else the record's operating speed over U0)."""
     if facts.U0 <= 0:
         return None, 1.0
     speed = _operating(np.hypot(df["u"].to_numpy(float), df["v"].to_numpy(float)))
@@ -350,9 +352,10 @@ def _envelope(df, facts: VesselFacts) -> dict:
 
 
 def check_envelope(vessel_cfg, records: list, names: list[str] | None = None) -> None:
-    """Refuse the first value outside its channel's physical envelope for the vessel (:data:`ENVELOPE_SPEED`),
-    naming the file, the column, the row (the record's data rows from 1) and the value; raises
-    :class:`RecordCheckError`. Not switched off by ``checks=off``: such a value is no measurement."""
+    """Refuse the first value outside its channel's physical envelope for the vessel
+    (:data:`ENVELOPE_SPEED`), naming the file, the column, the row (the record's data rows from
+    1) and the value; raises :class:`RecordCheckError`. Not switched off by ``checks=off``: such
+    a value is no measurement."""
     facts = vessel_facts(_plain(vessel_cfg))
     for i, rec in enumerate(records):
         df = rec.data if hasattr(rec, "data") else rec
@@ -370,14 +373,15 @@ def check_envelope(vessel_cfg, records: list, names: list[str] | None = None) ->
 
 
 def check_records(vessel_cfg: dict, records: list, names: list[str] | None = None, strict: bool = True) -> list[str]:
-    """Plausibility checks of records against the vessel (rudder sign, speed against the vessel's scale,
-    propeller speed against the vessel's): see the module docstring.
+    """Plausibility checks of records against the vessel (rudder sign, speed against the vessel's
+    scale, propeller speed against the vessel's): see the module docstring.
 
-    records: :class:`study.records.schema.Record` objects (with ``.data``, ``.path``, ``.meta``) or plain schema
-    DataFrames. names: what to call each record in the messages (default: its path, else ``meta['name']``, else
-    ``record <i>``). Returns the problems found, one line each, in record order; with ``strict=True`` raises
-    :class:`RecordCheckError` listing them (the first line the first problem) when any is found. A column the
-    record lacks is not checked here (that is the schema's job).
+    records: :class:`study.records.schema.Record` objects (with ``.data``, ``.path``, ``.meta``) or
+    plain schema DataFrames. names: what to call each record in the messages (default: its path,
+    else ``meta['name']``, else ``record <i>``). Returns the problems found, one line each, in
+    record order; with ``strict=True`` raises :class:`RecordCheckError` listing them (the first line
+    the first problem) when any is found. A column the record lacks is not checked here (that is the
+    schema's job).
     """
     cfg = _plain(vessel_cfg)
     facts = vessel_facts(cfg)

@@ -1,26 +1,30 @@
-"""Are emcee's regression intervals calibrated? Over many noisy datasets of one simulated case, how often the 90 %
-intervals of the reported parameters cover the truth, and how often the structure's noise-free limit, per
-structure and regression likelihood (``tests/run/test_regression_calibration.py``,
+"""Are emcee's regression intervals calibrated? Over many noisy datasets of one simulated case, how
+often the 90 % intervals of the reported parameters cover the truth, and how often the structure's
+noise-free limit, per structure and regression likelihood
+(``tests/run/test_regression_calibration.py``,
 ``benchmarks/bench_regression_calibration.py``).
 
 The case is the study's own: the truth vessel simulated once through the training manoeuvres
-(``study.run.pipeline.simulate_set``), then measured again and again with fresh noise (``study.run.pipeline.measurement``,
-dataset ``i`` with the noise seeds of a run with ``seed=i``), turned into rows by the structure and its post-processing
-(``study.identify.rows.prepare``; diff_center's random split drawn per dataset as in a run). Only the measurement
-noise changes between datasets: coverage over the sampling distribution of the noise, the trajectories fixed.
+(``study.run.pipeline.simulate_set``), then measured again and again with fresh noise
+(``study.run.pipeline.measurement``, dataset ``i`` with the noise seeds of a run with ``seed=i``),
+turned into rows by the structure and its post-processing (``study.identify.rows.prepare``;
+diff_center's random split drawn per dataset as in a run). Only the measurement noise changes
+between datasets: coverage over the sampling distribution of the noise, the trajectories fixed.
 
 The posteriors are evaluated in closed form, where they are Gaussian:
 
 - ``regression``: exactly what ``EmceeSampler.fit`` samples (``EmceeSampler.gaussian_regression``);
-- ``regression_iid``: normal with mean and covariance of the iid likelihood at its most probable noise scale and
-  the same weak prior (the noise scale's posterior is sharp for thousands of rows, so the Student-t marginal is
-  normal to well within the binomial spread of a coverage count; labelled as an approximation).
+- ``regression_iid``: normal with mean and covariance of the iid likelihood at its most probable
+  noise scale and the same weak prior (the noise scale's posterior is sharp for thousands of rows,
+  so the Student-t marginal is normal to well within the binomial spread of a coverage count;
+  labelled as an approximation).
 
-Nomoto models report K, T, alpha: their intervals are the 5 % and 95 % quantiles of the physical parameters of
-``draws`` Gaussian draws of the regression coefficients, as ``study.identify.fit`` does with emcee's draws. The
-**noise-free limit** is the same likelihood on the noise-free records with the same structure (and, for
-``regression``, the noise mix fitted to the noisy dataset): the gap between covering it and covering the truth is
-the structure's own bias (truncation), not miscalibration.
+Nomoto models report K, T, alpha: their intervals are the 5 % and 95 % quantiles of the physical
+parameters of ``draws`` Gaussian draws of the regression coefficients, as ``study.identify.fit``
+does with emcee's draws. The **noise-free limit** is the same likelihood on the noise-free records
+with the same structure (and, for ``regression``, the noise mix fitted to the noisy dataset): the
+gap between covering it and covering the truth is the structure's own bias (truncation), not
+miscalibration.
 """
 from __future__ import annotations
 
@@ -35,7 +39,8 @@ LIKELIHOODS = ("regression", "regression_iid")
 
 @dataclass
 class Case:
-    """A simulated identification case: the run configuration's parts, the model, the noise-free records."""
+    """A simulated identification case: the run configuration's parts, the model, the noise-free
+    records."""
 
     conf: dict
     model: object
@@ -46,10 +51,11 @@ class Case:
 
 def make_case(vessel: str, model: str, train: list, noise: str = "low_relative", sample_dt: float | None = None,
               sample_dt_LU: float | None = None, sim: dict | None = None, name: str = "") -> Case:
-    """The case of ``vessel`` (config name) identified with ``model`` from the ``train`` manoeuvres, measured with
-    the ``noise`` config (optionally resampled at ``sample_dt`` s or ``sample_dt_LU`` L/U0). The default is 1 % of
-    each channel's RMS (``low_relative``), the noise the README's calibration table was measured with; the project's
-    default ``noise=low`` (absolute sensor noise) came later."""
+    """The case of ``vessel`` (config name) identified with ``model`` from the ``train``
+    manoeuvres, measured with the ``noise`` config (optionally resampled at ``sample_dt`` s or
+    ``sample_dt_LU`` L/U0). The default is 1 % of each channel's RMS (``low_relative``), the
+    noise the README's calibration table was measured with; the project's default ``noise=low``
+    (absolute sensor noise) came later."""
     from study.configuration.compose import read_config
     from study.identify.models import make_model
     from study.run.pipeline import simulate_set, vessels_for
@@ -68,7 +74,8 @@ def make_case(vessel: str, model: str, train: list, noise: str = "low_relative",
 
 
 def records(case: Case, seed: int, noise_free: bool = False) -> list:
-    """The training records of dataset ``seed`` (the noise a run with this seed draws), or noise-free ones sampled
+    """The training records of dataset ``seed`` (the noise a run with this seed draws), or
+    noise-free ones sampled
     alike."""
     from study.run.pipeline import measurement
 
@@ -81,7 +88,8 @@ def records(case: Case, seed: int, noise_free: bool = False) -> list:
 
 
 def _iid_posterior(X, y, prior_sd, s2=None):
-    """Normal posterior of the iid likelihood at the noise scale ``s2`` (its most probable value when None)."""
+    """Normal posterior of the iid likelihood at the noise scale ``s2`` (its most probable value
+    when None)."""
     n, k = X.shape
     A = X.T @ X
     if s2 is None:
@@ -93,7 +101,8 @@ def _iid_posterior(X, y, prior_sd, s2=None):
 
 
 def _reported(model, names, mean, cov, rng, draws: int, level: float):
-    """{parameter: (estimate, low, high)} of the parameters a run reports (K, T, alpha for Nomoto models)."""
+    """{parameter: (estimate, low, high)} of the parameters a run reports (K, T, alpha for Nomoto
+    models)."""
     q = (0.5 - level / 2, 0.5 + level / 2)
     if model.type == "nomoto":
         D = rng.multivariate_normal(mean, cov, size=draws, method="cholesky")
@@ -119,9 +128,9 @@ class _Whitening:
 
 def dataset_intervals(case: Case, structure, seed: int, likelihood: str = "regression", level: float = 0.9,
                       draws: int = 4000, correct: bool = True) -> list[dict]:
-    """One dataset: per reported parameter its estimate, interval, truth, the structure's noise-free limit and
-    ``bias_est``, the truncation bias the run estimates from its own noisy records (``study.identify.truncation``;
-    its aim: ``limit - truth``)."""
+    """One dataset: per reported parameter its estimate, interval, truth, the structure's
+    noise-free limit and ``bias_est``, the truncation bias the run estimates from its own noisy
+    records (``study.identify.truncation``; its aim: ``limit - truth``)."""
     from study.identify.estimators.bayes import EmceeSampler
     from study.identify.fit import truncation_bias
     from study.identify.rows import prepare, row_errors, truncation_rows
@@ -170,8 +179,8 @@ def dataset_intervals(case: Case, structure, seed: int, likelihood: str = "regre
 
 def coverage(case: Case, structure: str | dict, n: int = 60, likelihood: str = "regression", seed0: int = 1,
              level: float = 0.9, correct: bool = True) -> pd.DataFrame:
-    """Intervals of ``n`` datasets (seeds ``seed0 .. seed0 + n - 1``), one row per dataset and parameter, with
-    ``covers_truth``, ``covers_limit``."""
+    """Intervals of ``n`` datasets (seeds ``seed0 .. seed0 + n - 1``), one row per dataset and
+    parameter, with ``covers_truth``, ``covers_limit``."""
     from study.identify.structures import make_structure
 
     st = make_structure(structure)
@@ -187,12 +196,13 @@ def coverage(case: Case, structure: str | dict, n: int = 60, likelihood: str = "
 
 
 def summary(df: pd.DataFrame, by=("case", "structure", "likelihood")) -> pd.DataFrame:
-    """Per group: intervals, coverage of the truth and of the noise-free limit (all parameters and the worst one),
-    median interval width and median absolute error relative to the truth, the limit's bias in posterior sd
-    (median |limit - truth| / (interval width / 3.29), 3.29 = the width of a 90 % normal interval in sd), the
-    run's own estimate of it (``est_bias_sd``, from ``bias_est``), and
-    ``sd_ratio``: the posterior sd (median interval width / 3.29) over the actual spread of the estimates over the
-    datasets, the median over the parameters (1: calibrated; the spread of 60 estimates is known to +-9 %)."""
+    """Per group: intervals, coverage of the truth and of the noise-free limit (all parameters
+    and the worst one), median interval width and median absolute error relative to the truth,
+    the limit's bias in posterior sd (median |limit - truth| / (interval width / 3.29), 3.29 =
+    the width of a 90 % normal interval in sd), the run's own estimate of it (``est_bias_sd``,
+    from ``bias_est``), and ``sd_ratio``: the posterior sd (median interval width / 3.29) over
+    the actual spread of the estimates over the datasets, the median over the parameters (1:
+    calibrated; the spread of 60 estimates is known to +-9 %)."""
     z2 = 2.0 * stats.norm.ppf(0.95)
     d = df.assign(width=(df["ci_high"] - df["ci_low"]).abs() / df["truth"].abs(),
                   error=(df["estimate"] - df["truth"]).abs() / df["truth"].abs(),

@@ -1,6 +1,6 @@
-"""What a simulated run (``study.run.pipeline``) and a run on files (``study.run.records_run``) share: the vessel as the
-engineer knows it, the estimator config with the study's overrides, whether a model x structure x estimator can
-run at all, and the validation traces a run keeps as artefacts.
+"""What a simulated run (``study.run.pipeline``) and a run on files (``study.run.records_run``)
+share: the vessel as the engineer knows it, the estimator config with the study's overrides, whether
+a model x structure x estimator can run at all, and the validation traces a run keeps as artefacts.
 """
 from __future__ import annotations
 
@@ -12,19 +12,22 @@ from study.sim.effects import ShallowWater
 
 
 def shallow_water(conf: dict) -> ShallowWater:
-    """The configured water depth (``depth``) as the simulator's shallow-water effect (deep water: no change)."""
+    """The configured water depth (``depth``) as the simulator's shallow-water effect (deep
+    water: no change)."""
     depth = conf.get("depth") or {}
     return ShallowWater(h_T=depth.get("h_T"), formula=depth.get("formula", "kijima_1990"))
 
 
 def known_vessel(conf: dict):
-    """The vessel as the engineer knows it: the vessel config at the configured depth (no current or wind)."""
+    """The vessel as the engineer knows it: the vessel config at the configured depth (no current
+    or wind)."""
     return load_vessel(conf["vessel"], [shallow_water(conf)])
 
 
 def estimator_config(conf: dict) -> dict:
-    """The run's estimator config with the study's ``estimator_overrides[<name>]`` merged into its params (a
-    sweep over estimators can shorten, say, emcee's chains without touching the others)."""
+    """The run's estimator config with the study's ``estimator_overrides[<name>]`` merged into
+    its params (a sweep over estimators can shorten, say, emcee's chains without touching the
+    others)."""
     cfg = dict(conf["estimator"])
     over = (conf.get("estimator_overrides") or {}).get(cfg.get("name")) or {}
     if over:
@@ -52,8 +55,8 @@ def skip_reason(model, structure, *estimators) -> str | None:
 
 
 def trace_bytes(meas, pred, channels, max_rows: int = 600, label: str = "truth") -> bytes:
-    """Truth (or, with ``label='measured'``, a measured record) and prediction of one validation manoeuvre,
-    thinned to at most ``max_rows`` rows, as CSV."""
+    """Truth (or, with ``label='measured'``, a measured record) and prediction of one validation
+    manoeuvre, thinned to at most ``max_rows`` rows, as CSV."""
     step = max(1, int(np.ceil(len(meas) / max_rows)))
     m = meas.iloc[::step].reset_index(drop=True)
     out = {"time": m["time"]}

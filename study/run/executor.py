@@ -1,18 +1,19 @@
-"""What to compute and when: claim a run, resume it when finished by the same code, compute it, hand the record
-to the store. The store (``study.store``) only keeps records; the computation is handed in from above (a
-function for one run, a :class:`ReplicatedJob` for the independent datasets of one configuration), the way
-emcee's sampler is handed a backend it never looks inside.
+"""What to compute and when: claim a run, resume it when finished by the same code, compute it, hand
+the record to the store. The store (``study.store``) only keeps records; the computation is handed
+in from above (a function for one run, a :class:`ReplicatedJob` for the independent datasets of one
+configuration), the way emcee's sampler is handed a backend it never looks inside.
 
 Replicates
 ----------
-``replicates=N`` identifies N independent datasets of one configuration in one job. Replicate ``k`` is a run of
-its own (its own run id, record and row), drawn from the dataset seed :func:`dataset_seed` ``(seed, k)``:
-replicate 0 is the configuration's seed itself (the run a job without replicates makes), replicate ``k >= 1``
-the first 31 bits of ``numpy.random.SeedSequence([seed, k])``'s state. The seed of replicate ``k`` depends on
-``seed`` and ``k`` only, so replicate 5 is the same dataset whether a job asks for 10 replicates or 50, and
-raising N later computes only the new ones. Work shared by the replicates (composing the models, simulating the
-noise-free truth) is done once per job; the replicates are computed in chunks, each written as soon as its
-chunk is done, so a kill loses at most one chunk (as many replicates as about
+``replicates=N`` identifies N independent datasets of one configuration in one job. Replicate ``k``
+is a run of its own (its own run id, record and row), drawn from the dataset seed
+:func:`dataset_seed` ``(seed, k)``: replicate 0 is the configuration's seed itself (the run a job
+without replicates makes), replicate ``k >= 1`` the first 31 bits of
+``numpy.random.SeedSequence([seed, k])``'s state. The seed of replicate ``k`` depends on ``seed``
+and ``k`` only, so replicate 5 is the same dataset whether a job asks for 10 replicates or 50, and
+raising N later computes only the new ones. Work shared by the replicates (composing the models,
+simulating the noise-free truth) is done once per job; the replicates are computed in chunks, each
+written as soon as its chunk is done, so a kill loses at most one chunk (as many replicates as about
 :data:`CHUNK_SECONDS` of computing, at least one).
 """
 from __future__ import annotations
@@ -47,10 +48,10 @@ def _chunk_seconds() -> float:
 
 
 def dataset_seed(seed: int, replicate: int) -> int:
-    """The seed of replicate ``replicate``'s dataset (measurement noise, random rudder signal, estimator's own
-    randomness): ``seed`` itself for replicate 0, else the first 31 bits of the state of
-    ``numpy.random.SeedSequence([seed, replicate])`` (independent streams for every pair; the same number
-    whatever the number of replicates asked for)."""
+    """The seed of replicate ``replicate``'s dataset (measurement noise, random rudder signal,
+    estimator's own randomness): ``seed`` itself for replicate 0, else the first 31 bits of the
+    state of ``numpy.random.SeedSequence([seed, replicate])`` (independent streams for every
+    pair; the same number whatever the number of replicates asked for)."""
     if replicate == 0:
         return int(seed)
     state = np.random.SeedSequence([int(seed) & 0xFFFFFFFF, int(replicate)]).generate_state(1, dtype=np.uint32)
@@ -70,15 +71,15 @@ class ReplicatedJob(Protocol):
     """What the executor needs of a job that identifies many datasets of one configuration."""
 
     def prepare(self) -> dict | None:
-        """The work every replicate shares; a result (``status: skipped`` with ``error``) that holds for every
-        replicate, or None."""
+        """The work every replicate shares; a result (``status: skipped`` with ``error``) that
+        holds for every replicate, or None."""
 
     def identify(self, rep: Replicate) -> Any:
         """One dataset drawn and identified (an intermediate result handed to :meth:`finish`)."""
 
     def finish(self, partials: list) -> list[dict]:
-        """The results of a chunk of identified datasets, in order: ``{'metrics', 'params', 'timings',
-        'artefacts'}`` each (validation replays may be batched over the chunk)."""
+        """The results of a chunk of identified datasets, in order: ``{'metrics', 'params',
+        'timings', 'artefacts'}`` each (validation replays may be batched over the chunk)."""
 
 
 def _reusable(rec: dict | None, code: dict, resume: str) -> bool:
@@ -93,7 +94,8 @@ def _when(rec: dict | None) -> tuple:
 
 def _record(rep: Replicate, config: dict, seed, started: str, out: Any, wall: float, code: dict,
             replicated: bool) -> tuple[dict, dict | None]:
-    """The record of one run from its result ``out`` (a dict, or the traceback text of a failure)."""
+    """The record of one run from its result ``out`` (a dict, or the traceback text of a
+    failure)."""
     record = {"run_id": rep.run_id, "config": config, "seed": seed, "started": started}
     if replicated:
         record.update(replicate=rep.index, dataset_seed=rep.dataset_seed)
@@ -140,8 +142,8 @@ def _write(store: ResultStore, record: dict, artefacts, existing: dict | None) -
 def run_replicated(store: ResultStore, config: dict, job: ReplicatedJob, replicates: int, seed: int | None, *,
                    force: bool = False, resume: str = "code", wait: bool = True,
                    code: dict | None = None) -> list[dict]:
-    """Identify ``replicates`` independent datasets of ``config``, each its own run, and leave exactly one
-    record per replicate.
+    """Identify ``replicates`` independent datasets of ``config``, each its own run, and leave
+    exactly one record per replicate.
 
     Parameters
     ----------
@@ -150,25 +152,28 @@ def run_replicated(store: ResultStore, config: dict, job: ReplicatedJob, replica
         The resolved configuration (without ``replicates``); the run id of replicate ``k`` is
         ``run_id(config, k)``.
     job : ReplicatedJob
-        What to compute; :meth:`ReplicatedJob.prepare` is called only when a replicate needs computing.
+        What to compute; :meth:`ReplicatedJob.prepare` is called only when a replicate needs
+        computing.
     replicates : int
         How many datasets (N >= 1): replicates 0 .. N-1.
     seed : int or None
-        The configuration's seed (stored in every record; each dataset's own seed is :func:`dataset_seed`).
+        The configuration's seed (stored in every record; each dataset's own seed is
+        :func:`dataset_seed`).
     force, resume, wait, code
         As for :func:`run_guarded`, per replicate.
 
     Returns
     -------
     list of dict
-        The record of each replicate, in order (``resumed=True`` when it was already finished; ``status:
-        claimed`` when another live process computes it and ``wait`` is False).
+        The record of each replicate, in order (``resumed=True`` when it was already finished;
+        ``status: claimed`` when another live process computes it and ``wait`` is False).
 
     Notes
     -----
-    A replicate whose identification or validation raises is a 'failed' record with its traceback; the others
-    land. A failure of the shared work fails every replicate still to compute, each with that traceback.
-    ``KeyboardInterrupt`` / ``SystemExit`` propagate and leave no record of the chunk in progress.
+    A replicate whose identification or validation raises is a 'failed' record with its traceback;
+    the others land. A failure of the shared work fails every replicate still to compute, each with
+    that traceback. ``KeyboardInterrupt`` / ``SystemExit`` propagate and leave no record of the
+    chunk in progress.
     """
     _check_arguments(resume, replicates)
     replicated = replicates > 1
@@ -199,7 +204,8 @@ def run_replicated(store: ResultStore, config: dict, job: ReplicatedJob, replica
 
 
 def _check_arguments(resume: str, replicates) -> None:
-    """Refuse a ``resume`` mode or a number of ``replicates`` that :func:`run_replicated` does not know."""
+    """Refuse a ``resume`` mode or a number of ``replicates`` that :func:`run_replicated` does
+    not know."""
     if resume not in RESUME_MODES:
         raise ValueError(f"resume={resume!r}: expected one of {RESUME_MODES}")
     if not (isinstance(replicates, int) and not isinstance(replicates, bool) and replicates >= 1):
@@ -208,8 +214,8 @@ def _check_arguments(resume: str, replicates) -> None:
 
 def _finished_replicates(store: ResultStore, config: dict, replicates: int, seed, code: dict, force: bool,
                          resume: str) -> tuple[list, list, dict]:
-    """The records of the replicates already finished (``out``, None where not), the replicates still to compute
-    (``pending``) and the record each of those had (``before``, None if none)."""
+    """The records of the replicates already finished (``out``, None where not), the replicates
+    still to compute (``pending``) and the record each of those had (``before``, None if none)."""
     out: list = [None] * replicates
     pending, before = [], {}
     for k in range(replicates):
@@ -225,8 +231,9 @@ def _finished_replicates(store: ResultStore, config: dict, replicates: int, seed
 
 def _claim_batch(store: ResultStore, config: dict, batch: list, code: dict, force: bool, resume: str, wait: bool,
                  out: list, before: dict, claims: list) -> None:
-    """Claim each replicate of ``batch`` (appended to ``claims``, for the caller to release); fill ``out`` for
-    those claimed by another live process (when not waiting) or finished meanwhile by one we waited for."""
+    """Claim each replicate of ``batch`` (appended to ``claims``, for the caller to release);
+    fill ``out`` for those claimed by another live process (when not waiting) or finished
+    meanwhile by one we waited for."""
     for rep in batch:
         claim = store.claim(rep.run_id)
         if not claim.acquire(wait=wait):
@@ -243,7 +250,8 @@ def _claim_batch(store: ResultStore, config: dict, batch: list, code: dict, forc
 
 
 def _prepare_shared(job: ReplicatedJob) -> tuple[Any, float]:
-    """The job's shared work (its result, or its traceback text when it failed) and the seconds it took."""
+    """The job's shared work (its result, or its traceback text when it failed) and the seconds
+    it took."""
     t0 = time.perf_counter()
     try:
         shared = job.prepare()
@@ -254,8 +262,8 @@ def _prepare_shared(job: ReplicatedJob) -> tuple[Any, float]:
 
 def _compute_and_write(store: ResultStore, config: dict, job: ReplicatedJob, todo: list, shared: Any,
                        shared_wall: float, seed, code: dict, replicated: bool, out: list, before: dict) -> float:
-    """Compute the replicates ``todo`` and write their records (into ``out`` too); the seconds the computing
-    took. ``shared_wall``: each replicate's share of the shared work's time."""
+    """Compute the replicates ``todo`` and write their records (into ``out`` too); the seconds
+    the computing took. ``shared_wall``: each replicate's share of the shared work's time."""
     t0, started = time.perf_counter(), now_iso()
     results = _compute_chunk(job, todo, shared)
     took = time.perf_counter() - t0
@@ -317,7 +325,8 @@ class _OneRun:
 
 def run_guarded(store: ResultStore, config: dict, fn: Callable[[], dict], seed: int | None, *,
                 force: bool = False, resume: str = "code", wait: bool = True, code: dict | None = None) -> dict:
-    """Run ``fn`` for ``config`` unless already finished by the same code, and always leave exactly one record.
+    """Run ``fn`` for ``config`` unless already finished by the same code, and always leave exactly
+    one record.
 
     Parameters
     ----------
@@ -325,22 +334,25 @@ def run_guarded(store: ResultStore, config: dict, fn: Callable[[], dict], seed: 
     config : dict
         The resolved configuration; its run id names the record.
     fn : callable
-        ``fn() -> {'metrics', 'params', 'timings'}`` plus optionally ``status`` ('skipped' with ``error`` = the
-        reason) and ``artefacts`` (``{name: bytes or path}``, moved into ``artefacts/<run_id>/``).
+        ``fn() -> {'metrics', 'params', 'timings'}`` plus optionally ``status`` ('skipped' with
+        ``error`` = the reason) and ``artefacts`` (``{name: bytes or path}``, moved into
+        ``artefacts/<run_id>/``).
     seed : int or None
         Stored in the record.
     force : bool
         Compute the run even if a finished record exists (it is moved to ``records/superseded/``).
     resume : {'code', 'config'}
-        Reuse a finished record only if the fingerprint of the code that made it equals the current one
-        (``code``, the default: :mod:`study.store.fingerprint`), or whatever code made it (``config``). A record
-        computed by other code is recomputed, and kept under ``records/superseded/``.
+        Reuse a finished record only if the fingerprint of the code that made it equals the current
+        one (``code``, the default: :mod:`study.store.fingerprint`), or whatever code made it
+        (``config``). A record computed by other code is recomputed, and kept under
+        ``records/superseded/``.
     wait : bool
-        When another live process is computing the same run (it holds the run's claim): wait for it and reuse
-        its record (True), or return at once with status ``'claimed'`` and ``claimed_by`` (False: a sweep moves
-        on to its next run and leaves this one to its owner).
+        When another live process is computing the same run (it holds the run's claim): wait for it
+        and reuse its record (True), or return at once with status ``'claimed'`` and ``claimed_by``
+        (False: a sweep moves on to its next run and leaves this one to its owner).
     code : dict, optional
-        The code fingerprint to compare and store; default :func:`study.store.fingerprint.code_fingerprint`.
+        The code fingerprint to compare and store; default
+        :func:`study.store.fingerprint.code_fingerprint`.
 
     Returns
     -------
@@ -349,9 +361,10 @@ def run_guarded(store: ResultStore, config: dict, fn: Callable[[], dict], seed: 
 
     Notes
     -----
-    An exception in ``fn`` (or a malformed result) is recorded as 'failed' with the full traceback in
-    ``error`` and is not re-raised, so a sweep goes on. ``KeyboardInterrupt``/``SystemExit`` propagate and
-    leave no record: an interrupted run is simply run again on resume. ``timings['wall']`` is measured here.
+    An exception in ``fn`` (or a malformed result) is recorded as 'failed' with the full traceback
+    in ``error`` and is not re-raised, so a sweep goes on. ``KeyboardInterrupt``/``SystemExit``
+    propagate and leave no record: an interrupted run is simply run again on resume.
+    ``timings['wall']`` is measured here.
     """
     return run_replicated(store, config, _OneRun(fn), 1, seed, force=force, resume=resume, wait=wait,
                           code=code)[0]

@@ -1,12 +1,14 @@
 """One run of the study, independent of Hydra: simulate -> measure -> identify -> validate (or, with
-``train=<files>``, read -> identify -> replay through the validation records: ``study.run.records_run``).
+``train=<files>``, read -> identify -> replay through the validation records:
+``study.run.records_run``).
 
-``run_study(conf)`` takes the resolved configuration as a plain dict (what the Hydra app passes, and what
-tests build with ``compose``) and returns the run's result: metrics, per-parameter estimates against truth,
-timings. :class:`SimulatedJob` is the same run for many independent datasets of one configuration
-(``replicates=N``): the noise-free truth is simulated once, each dataset draws its own measurement noise (and
-its own random rudder signal), and the identified models are replayed through each validation manoeuvre in one
-batch. The executor (``study.run.executor``) claims, resumes and records each dataset as a run of its own.
+``run_study(conf)`` takes the resolved configuration as a plain dict (what the Hydra app passes, and
+what tests build with ``compose``) and returns the run's result: metrics, per-parameter estimates
+against truth, timings. :class:`SimulatedJob` is the same run for many independent datasets of one
+configuration (``replicates=N``): the noise-free truth is simulated once, each dataset draws its own
+measurement noise (and its own random rudder signal), and the identified models are replayed through
+each validation manoeuvre in one batch. The executor (``study.run.executor``) claims, resumes and
+records each dataset as a run of its own.
 """
 from __future__ import annotations
 
@@ -25,7 +27,8 @@ from study.sim.effects import NotApplicable
 
 
 def resolve_effects(effects: list, U0: float) -> list[dict]:
-    """Copy effect configs, turning keys ending in ``_U0`` (fractions of the service speed) into m/s."""
+    """Copy effect configs, turning keys ending in ``_U0`` (fractions of the service speed) into
+    m/s."""
     out = []
     for e in effects or []:
         e = dict(e)
@@ -38,8 +41,8 @@ def resolve_effects(effects: list, U0: float) -> list[dict]:
 def vessels_for(conf: dict):
     """(truth vessel with depth + environment, model vessel with depth only).
 
-    The model vessel is what the engineer knows: the depth (measured) but not the current or wind, and not the
-    coefficients being identified.
+    The model vessel is what the engineer knows: the depth (measured) but not the current or wind,
+    and not the coefficients being identified.
     """
     U0 = float(conf["vessel"]["operation"]["U0"])
     env_effects = resolve_effects((conf.get("environment") or {}).get("effects", []), U0)
@@ -53,17 +56,19 @@ def _level(x):
 
 
 def time_scale(vessel) -> float | None:
-    """The ship's own time scale L/U0 [s] (the time it takes to travel its length), or None without a length."""
+    """The ship's own time scale L/U0 [s] (the time it takes to travel its length), or None
+    without a length."""
     L = ((getattr(vessel, "cfg", None) or {}).get("particulars") or {}).get("Lpp")
     U = float(getattr(vessel, "U0", 0.0) or 0.0)
     return float(L) / U if L and U > 0 else None
 
 
 def sample_interval(conf: dict, vessel=None) -> float | None:
-    """The records' sampling interval [s]: ``noise.sample_dt`` (seconds) or ``noise.sample_dt_LU`` (in the ship's
-    time scale L/U0, so studies of ships of different size and speed sample alike), rounded to a whole multiple of
-    the simulation step (records are decimated from the simulation, never interpolated between its steps). None:
-    every step. Both given, or a value that is not positive, is an error naming the setting."""
+    """The records' sampling interval [s]: ``noise.sample_dt`` (seconds) or
+    ``noise.sample_dt_LU`` (in the ship's time scale L/U0, so studies of ships of different size
+    and speed sample alike), rounded to a whole multiple of the simulation step (records are
+    decimated from the simulation, never interpolated between its steps). None: every step. Both
+    given, or a value that is not positive, is an error naming the setting."""
     nz = conf.get("noise") or {}
     dt_s, dt_lu = nz.get("sample_dt"), nz.get("sample_dt_LU")
     if dt_s is not None and dt_lu is not None:
@@ -89,8 +94,9 @@ def vessel_scale(vessel) -> str:
 
 
 def noise_sd(conf: dict, vessel=None) -> dict | None:
-    """The absolute white-noise standard deviation per channel (SI, rad) of a ``kind: absolute`` noise config:
-    its ``full_scale`` or ``model_scale`` sensors, by the vessel's ``scale``; None for the relative kind."""
+    """The absolute white-noise standard deviation per channel (SI, rad) of a ``kind: absolute``
+    noise config: its ``full_scale`` or ``model_scale`` sensors, by the vessel's ``scale``; None
+    for the relative kind."""
     nz = conf.get("noise") or {}
     kind = nz.get("kind", "relative")
     if kind not in NOISE_KINDS:
@@ -108,8 +114,9 @@ def noise_sd(conf: dict, vessel=None) -> dict | None:
 
 
 def measurement(conf: dict, seed: int, vessel=None) -> MeasurementModel:
-    """The measurement model of a run: ``conf['noise']`` of ``kind: relative`` (``level``: fractions of each
-    channel's RMS) or ``kind: absolute`` (sensor standard deviations in physical units, at the vessel's scale)."""
+    """The measurement model of a run: ``conf['noise']`` of ``kind: relative`` (``level``:
+    fractions of each channel's RMS) or ``kind: absolute`` (sensor standard deviations in
+    physical units, at the vessel's scale)."""
     nz = dict(conf.get("noise") or {})
     sd = noise_sd(conf, vessel)
     return MeasurementModel(
@@ -120,8 +127,8 @@ def measurement(conf: dict, seed: int, vessel=None) -> MeasurementModel:
 
 
 def simulate_set(vessel, names, conf, seed_base, only=None):
-    """Each manoeuvre of ``names`` (only those in ``only``, when given), manoeuvre ``i`` simulated with seed
-    ``seed_base + i`` (its random signal, where it has one)."""
+    """Each manoeuvre of ``names`` (only those in ``only``, when given), manoeuvre ``i``
+    simulated with seed ``seed_base + i`` (its random signal, where it has one)."""
     sim = conf.get("sim") or {}
     dt = sim.get("dt") or default_dt(vessel)
     out = {}
@@ -135,9 +142,9 @@ def simulate_set(vessel, names, conf, seed_base, only=None):
 
 
 def _predictive_band(model, draws: dict, maneuver: str, meas, conf, seed, max_rows: int = 600):
-    """The posterior-predictive band of one validation manoeuvre: every draw simulated in one batch call
-    (each closing its own controller), the 5 %, 50 % and 95 % quantiles of each predicted channel, as CSV.
-    None when no draw can be simulated."""
+    """The posterior-predictive band of one validation manoeuvre: every draw simulated in one
+    batch call (each closing its own controller), the 5 %, 50 % and 95 % quantiles of each
+    predicted channel, as CSV. None when no draw can be simulated."""
     from study.sim import simulate_batch
 
     names = list(draws)
@@ -176,14 +183,15 @@ def _predictive_band(model, draws: dict, maneuver: str, meas, conf, seed, max_ro
 
 
 def study_config(conf: dict) -> tuple[dict, object]:
-    """``(run configuration, records)`` of a composed configuration: what the results store records (and hashes
-    into the run id), and the records read from files (None for a simulated run).
+    """``(run configuration, records)`` of a composed configuration: what the results store records
+    (and hashes into the run id), and the records read from files (None for a simulated run).
 
-    Without ``train`` the run configuration is ``conf`` without the file keys (``train``, ``validate``,
-    ``states``, ``checks``: ``study.run.records_run.FILE_KEYS``), so a simulated run keeps the run id it had before
-    they existed. With ``train`` the files are read, checksummed and checked (``study.run.records_run.load``; a
-    problem raises ``RecordsInputError``, one line) and the configuration holds the records' names and sha256
-    instead of the simulation's axes (``study.run.records_run.run_config``).
+    Without ``train`` the run configuration is ``conf`` without the file keys (``train``,
+    ``validate``, ``states``, ``checks``: ``study.run.records_run.FILE_KEYS``), so a simulated run
+    keeps the run id it had before they existed. With ``train`` the files are read, checksummed and
+    checked (``study.run.records_run.load``; a problem raises ``RecordsInputError``, one line) and
+    the configuration holds the records' names and sha256 instead of the simulation's axes
+    (``study.run.records_run.run_config``).
     """
     from study.run.records_run import FILE_KEYS, RecordsInputError, check_study_name, load, run_config
 
@@ -216,16 +224,17 @@ class _Identified:
 class SimulatedJob:
     """Simulate -> measure -> identify -> validate, for any number of datasets of one configuration.
 
-    The shared work (:meth:`prepare`: vessels, model, structure, estimator, the noise-free training records of
-    every manoeuvre that has no random signal, the validation truth and its metrics) is done once; each dataset
-    (:meth:`identify`) re-simulates only the random-rudder manoeuvres with its own signal, measures every record
-    with its own noise and identifies; :meth:`finish` replays the identified models of a chunk of datasets
-    through each validation manoeuvre in one batch call of the integrator.
+    The shared work (:meth:`prepare`: vessels, model, structure, estimator, the noise-free training
+    records of every manoeuvre that has no random signal, the validation truth and its metrics) is
+    done once; each dataset (:meth:`identify`) re-simulates only the random-rudder manoeuvres with
+    its own signal, measures every record with its own noise and identifies; :meth:`finish` replays
+    the identified models of a chunk of datasets through each validation manoeuvre in one batch call
+    of the integrator.
 
-    Seeds: dataset seed ``s`` (``study.run.executor.dataset_seed``; the configuration's ``seed`` for replicate 0)
-    draws the random rudder signal of training manoeuvre ``i`` from ``1000 s + i`` and its measurement noise from
-    ``7919 s + i``; the estimator's own randomness from ``s``. The validation manoeuvres are the configuration's
-    (``1000 seed + 500``), the same for every dataset.
+    Seeds: dataset seed ``s`` (``study.run.executor.dataset_seed``; the configuration's ``seed`` for
+    replicate 0) draws the random rudder signal of training manoeuvre ``i`` from ``1000 s + i`` and
+    its measurement noise from ``7919 s + i``; the estimator's own randomness from ``s``. The
+    validation manoeuvres are the configuration's (``1000 seed + 500``), the same for every dataset.
     """
 
     def __init__(self, conf: dict):
@@ -340,8 +349,9 @@ class SimulatedJob:
                 for d in done]
 
     def _replay(self, vessels: list, names: list) -> list[dict]:
-        """Each identified model through each validation manoeuvre: one batch call of the integrator per
-        manoeuvre when the models differ only in their parameters (a model with effects is replayed alone)."""
+        """Each identified model through each validation manoeuvre: one batch call of the
+        integrator per manoeuvre when the models differ only in their parameters (a model with
+        effects is replayed alone)."""
         if not vessels:
             return []
         v0 = vessels[0]
@@ -365,7 +375,8 @@ class SimulatedJob:
 
 
 def _standard(df, L) -> dict:
-    """The standard manoeuvre metrics of a record as floats (those it cannot carry, e.g. too short, absent)."""
+    """The standard manoeuvre metrics of a record as floats (those it cannot carry, e.g. too
+    short, absent)."""
     try:
         return {k: float(v) for k, v in standard_metrics(df, L=L).items()
                 if np.isscalar(v) and not isinstance(v, str)}
@@ -374,11 +385,12 @@ def _standard(df, L) -> dict:
 
 
 def run_study(conf: dict, data=None) -> dict:
-    """Run one configuration on one dataset; returns ``{'metrics', 'params', 'timings', 'artefacts'}`` or a
-    skipped result ``{'status': 'skipped', 'error': reason}`` for a combination that makes no sense.
+    """Run one configuration on one dataset; returns ``{'metrics', 'params', 'timings',
+    'artefacts'}`` or a skipped result ``{'status': 'skipped', 'error': reason}`` for a combination
+    that makes no sense.
 
-    With ``conf['train']`` set the run is on the user's records (``study.run.records_run``): ``data`` are the records
-    ``study_config`` read (read here when None)."""
+    With ``conf['train']`` set the run is on the user's records (``study.run.records_run``):
+    ``data`` are the records ``study_config`` read (read here when None)."""
     from study.run.settings import check_run
 
     check_run(conf)  # a setting that makes no sense is refused, named (the app checks it before any work too)

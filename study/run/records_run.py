@@ -1,50 +1,58 @@
-"""A study run on the user's own records: ``python -m study train=<files> [validate=<files>] vessel=<v>
-model=<m> structure=<s> estimator=<e>``.
+"""A study run on the user's own records: ``python -m study train=<files> [validate=<files>]
+vessel=<v> model=<m> structure=<s> estimator=<e>``.
 
-Nothing is simulated. The training records are read from files (``study.records.schema.read_records``; HSVA's KVLCC2
-``.dat`` files and the Esso Osaka CSVs through ``study.records.loaders`` as the doctor reads them), checked against the
-vessel (``study.records.vessel_checks``: rudder sign, speed against the vessel's scale, n in rps), the model is
-identified on them with any structure and estimator exactly as in a simulated run (the vessel config gives the
-known parts: mass, propeller, rudder, and the configured water depth ``depth``), and each validation record
-gets an open-loop replay of the identified model with its measured rudder and propeller from its initial
-state (the doctor's replay, ``study.identify.with_effects.EffectsProblem.predict``).
+Nothing is simulated. The training records are read from files
+(``study.records.schema.read_records``; HSVA's KVLCC2 ``.dat`` files and the Esso Osaka CSVs through
+``study.records.loaders`` as the doctor reads them), checked against the vessel
+(``study.records.vessel_checks``: rudder sign, speed against the vessel's scale, n in rps), the
+model is identified on them with any structure and estimator exactly as in a simulated run (the
+vessel config gives the known parts: mass, propeller, rudder, and the configured water depth
+``depth``), and each validation record gets an open-loop replay of the identified model with its
+measured rudder and propeller from its initial state (the doctor's replay,
+``study.identify.with_effects.EffectsProblem.predict``).
 
 What lands in the results table, and why:
 
-- **The run's configuration** (hence its run id) holds each record's ``name`` and the ``sha256`` of its file's
-  bytes under ``train`` / ``validate`` (and ``states``): a changed file is a new run, the same bytes moved to
-  another folder are the same run (the paths are in the metrics ``train_files`` / ``validate_files``).
-  ``environment``, ``noise``, ``maneuvers`` and ``sim`` describe how a simulated run *makes* its data; they do
-  not apply to files and are dropped from the configuration before hashing, so a sweep over them on the same
-  files is one run, and ``cfg_noise.*`` is empty for file runs instead of claiming a noise level the data never
-  had. ``checks`` decides whether a run starts, not what it computes: it is reported in the metric
-  ``record_checks``. ``depth`` stays: it is the water depth the *model* assumes (as the doctor's ``depth``).
-- **No truth**: params rows have ``truth`` None (NaN in the table) and ``truth_kind`` ``none (measured
-  records)``; no ``drift_*`` and no ``truth_exact`` metric. ``config_rel_diff_median`` / ``_max`` give the
-  relative difference of the estimates from the vessel config's own values (what the known model would use;
-  derived K, T for a Nomoto model of a force-model vessel): a distance from the prior, not an error.
-- **Validation**, per record ``<name>`` (file stem; parent folders added when two stems collide; characters
-  other than letters, digits, ``_`` and ``-`` become ``_`` in metric names): ``val_<name>_diverged``, and for a
-  replay that did not diverge (the doctor's envelope: 5 U0, 20 U0/L) the metrics of ``study.records.metrics
-  .prediction_metrics`` over the replayed span (the record's first segment up to a gap):
-  ``val_<name>_rmse_<c>``, ``val_<name>_nrmse_<c>`` (RMSE over the **standard deviation of the measured
-  channel** over that span; NaN when it is 0), ``_max_abs_error_<c>``, ``_cc_<c>``, ``_track_rmse``,
-  ``_final_position_error``, for the model's channels (u, v, r, psi; r, psi for Nomoto); the manoeuvre metrics
-  of ``study.records.maneuver_metrics`` (the replay-aware use of ``study.records.metrics``: turning circle: tactical
-  diameter, advance, transfer, steady turning rate; zigzag: overshoots from the measured switch heading,
-  period, initial turning time, time to check yaw) as ``val_<name>_measured_<metric>`` and
-  ``val_<name>_model_<metric>``; summaries ``val_records``, ``val_diverged_records``, ``val_nrmse_mean`` (mean
-  over the records that did not diverge of the mean NRMSE of the model's channels). Without ``validate``:
-  ``val_skipped`` = 1 and ``val_skipped_reason`` says there was no held-out replay (the model is never
-  validated on its own training records). A validation file with the same bytes as a training file is refused.
-- **Depth**: the configured ``depth`` corrects the vessel's known parts and the model is identified and replayed
-  at that one depth. A record's ``depth`` column or metadata is *not used* by the identification (it is by
-  the doctor, and by ``model.effects=[shallow_water]`` here, which is the doctor's identification); when a
-  record's measured h/T (below 4) differs from the configured one by more than 10 %, ``notes`` says so.
-- **Bad input** (a pattern matching nothing, an unreadable file, a schema error, a record that fails the
-  vessel checks) raises :class:`RecordsInputError` with one line naming the pattern or file, the column or
-  value and what was expected, before the run starts: ``python -m study`` prints it and exits with status 2,
-  and nothing is written. A run that fails after that is recorded as ``failed`` by the store, as always.
+- **The run's configuration** (hence its run id) holds each record's ``name`` and the ``sha256`` of
+  its file's bytes under ``train`` / ``validate`` (and ``states``): a changed file is a new run, the
+  same bytes moved to another folder are the same run (the paths are in the metrics ``train_files``
+  / ``validate_files``). ``environment``, ``noise``, ``maneuvers`` and ``sim`` describe how a
+  simulated run *makes* its data; they do not apply to files and are dropped from the configuration
+  before hashing, so a sweep over them on the same files is one run, and ``cfg_noise.*`` is empty
+  for file runs instead of claiming a noise level the data never had. ``checks`` decides whether a
+  run starts, not what it computes: it is reported in the metric ``record_checks``. ``depth`` stays:
+  it is the water depth the *model* assumes (as the doctor's ``depth``).
+- **No truth**: params rows have ``truth`` None (NaN in the table) and ``truth_kind`` ``none
+  (measured records)``; no ``drift_*`` and no ``truth_exact`` metric. ``config_rel_diff_median`` /
+  ``_max`` give the relative difference of the estimates from the vessel config's own values (what
+  the known model would use; derived K, T for a Nomoto model of a force-model vessel): a distance
+  from the prior, not an error.
+- **Validation**, per record ``<name>`` (file stem; parent folders added when two stems collide;
+  characters other than letters, digits, ``_`` and ``-`` become ``_`` in metric names):
+  ``val_<name>_diverged``, and for a replay that did not diverge (the doctor's envelope: 5 U0, 20
+  U0/L) the metrics of ``study.records.metrics .prediction_metrics`` over the replayed span (the
+  record's first segment up to a gap): ``val_<name>_rmse_<c>``, ``val_<name>_nrmse_<c>`` (RMSE over
+  the **standard deviation of the measured channel** over that span; NaN when it is 0),
+  ``_max_abs_error_<c>``, ``_cc_<c>``, ``_track_rmse``, ``_final_position_error``, for the model's
+  channels (u, v, r, psi; r, psi for Nomoto); the manoeuvre metrics of
+  ``study.records.maneuver_metrics`` (the replay-aware use of ``study.records.metrics``: turning
+  circle: tactical diameter, advance, transfer, steady turning rate; zigzag: overshoots from the
+  measured switch heading, period, initial turning time, time to check yaw) as
+  ``val_<name>_measured_<metric>`` and ``val_<name>_model_<metric>``; summaries ``val_records``,
+  ``val_diverged_records``, ``val_nrmse_mean`` (mean over the records that did not diverge of the
+  mean NRMSE of the model's channels). Without ``validate``: ``val_skipped`` = 1 and
+  ``val_skipped_reason`` says there was no held-out replay (the model is never validated on its own
+  training records). A validation file with the same bytes as a training file is refused.
+- **Depth**: the configured ``depth`` corrects the vessel's known parts and the model is identified
+  and replayed at that one depth. A record's ``depth`` column or metadata is *not used* by the
+  identification (it is by the doctor, and by ``model.effects=[shallow_water]`` here, which is the
+  doctor's identification); when a record's measured h/T (below 4) differs from the configured one
+  by more than 10 %, ``notes`` says so.
+- **Bad input** (a pattern matching nothing, an unreadable file, a schema error, a record that fails
+  the vessel checks) raises :class:`RecordsInputError` with one line naming the pattern or file, the
+  column or value and what was expected, before the run starts: ``python -m study`` prints it and
+  exits with status 2, and nothing is written. A run that fails after that is recorded as ``failed``
+  by the store, as always.
 """
 from __future__ import annotations
 
@@ -74,13 +82,15 @@ TRUTH_KIND = "none (measured records)"
 
 
 class RecordsInputError(ValueError):
-    """The records cannot be used: one line naming the pattern or file, the column or value, and what was
+    """The records cannot be used: one line naming the pattern or file, the column or value, and
+    what was
     expected."""
 
 
 @dataclass
 class RecordSet:
-    """The records of one role (``train`` or ``validate``): their names, files, checksums and contents."""
+    """The records of one role (``train`` or ``validate``): their names, files, checksums and
+    contents."""
 
     role: str
     patterns: list
@@ -95,7 +105,8 @@ class RecordSet:
 
 @dataclass
 class FileData:
-    """What ``load`` read: the training and validation records, the check results, the reading time."""
+    """What ``load`` read: the training and validation records, the check results, the reading
+    time."""
 
     train: RecordSet
     validate: RecordSet | None
@@ -110,7 +121,8 @@ def _one_line(text: str) -> str:
 
 
 def _files(role: str, pattern: str) -> list:
-    """The record files of one pattern: a file, every file of a folder, or the files a glob matches."""
+    """The record files of one pattern: a file, every file of a folder, or the files a glob
+    matches."""
     from study.records.schema import SUPPORTED
 
     ok_ext = SUPPORTED + (".dat",)
@@ -135,7 +147,8 @@ def _files(role: str, pattern: str) -> list:
 
 
 def _read_kwargs(conf: dict) -> dict:
-    """Options passed to ``study.records.schema.read_records``: ``states`` once it takes it (records lacking u, v, r)."""
+    """Options passed to ``study.records.schema.read_records``: ``states`` once it takes it
+    (records lacking u, v, r)."""
     from study.records.schema import read_records
 
     states = conf.get("states") or "measured"
@@ -183,7 +196,8 @@ def metric_key(name: str) -> str:
 
 
 def _vessel_check(conf: dict, sets: list) -> tuple[str, list]:
-    """(mode, problems) of the doctor's record checks against the vessel; raises under ``checks=error``."""
+    """(mode, problems) of the doctor's record checks against the vessel; raises under
+    ``checks=error``."""
     from study.records.vessel_checks import RecordCheckError, check_envelope, check_records
 
     mode = str(conf.get("checks") or "error")
@@ -210,7 +224,8 @@ def _vessel_check(conf: dict, sets: list) -> tuple[str, list]:
 def load(conf: dict) -> FileData:
     """Read, checksum and check the records named by ``conf['train']`` and ``conf['validate']``.
 
-    Raises :class:`RecordsInputError` (one line) on any problem with the files, before anything is run.
+    Raises :class:`RecordsInputError` (one line) on any problem with the files, before anything is
+    run.
     """
     from study.records.loaders import patterns
 
@@ -266,8 +281,9 @@ def load(conf: dict) -> FileData:
 
 
 def run_config(conf: dict, data: FileData) -> dict:
-    """The configuration a run on files is stored (and its run id computed) under: the composed one without
-    the simulation's axes and ``checks``, with each record's name and sha256 (see the module docstring)."""
+    """The configuration a run on files is stored (and its run id computed) under: the composed
+    one without the simulation's axes and ``checks``, with each record's name and sha256 (see the
+    module docstring)."""
     out = {k: v for k, v in conf.items() if k not in SIMULATION_KEYS + FILE_KEYS}
     out["train"] = data.train.config()
     out["validate"] = data.validate.config() if data.validate is not None else None
@@ -276,7 +292,8 @@ def run_config(conf: dict, data: FileData) -> dict:
 
 
 def check_study_name(conf: dict) -> None:
-    """A run on files must not join a simulated study: its figures assume a truth and the simulated axes."""
+    """A run on files must not join a simulated study: its figures assume a truth and the
+    simulated axes."""
     from study.configuration.compose import simulated_studies
 
     name = conf.get("study")
@@ -309,8 +326,9 @@ def _depth_notes(base, conf: dict, data: FileData) -> list:
 
 
 def _replayer(model, base, estimates: dict, records: list, names: list):
-    """``replay(record, name) -> DataFrame or None``: the identified model through a record by the doctor's
-    replay (measured rudder and propeller, the record's initial state; None when it diverged)."""
+    """``replay(record, name) -> DataFrame or None``: the identified model through a record by
+    the doctor's replay (measured rudder and propeller, the record's initial state; None when it
+    diverged)."""
     from study.identify.with_effects import EffectsProblem, Fit
 
     if model.type == "kind":
@@ -356,8 +374,8 @@ def _validate(replay, data: FileData, channels, L: float, keep_traces: bool, met
 
 
 def _components(conf: dict):
-    """The run's known vessel, model, structure and estimator configuration, as a tuple; or the reason the run is
-    skipped (a str)."""
+    """The run's known vessel, model, structure and estimator configuration, as a tuple; or the
+    reason the run is skipped (a str)."""
     from study.identify.models import make_model
     from study.identify.structures import make_structure
     from study.run.common import estimator_config, known_vessel, run_estimators, skip_reason
@@ -391,9 +409,10 @@ def _records_metrics(data: FileData) -> dict:
 
 def _identify_without_truth(model, structure, est_cfg: dict, conf: dict, data: FileData, seed: int, metrics: dict,
                             timings: dict, artefacts: dict):
-    """The model identified as in a simulated run, with what that run measures against a truth dropped (the
-    vessel config is no truth): the params rows, the estimates and the fit's own ``replay(record, name)`` (None
-    where the model is replayed from its estimates: every fit but that of a model with effects)."""
+    """The model identified as in a simulated run, with what that run measures against a truth
+    dropped (the vessel config is no truth): the params rows, the estimates and the fit's own
+    ``replay(record, name)`` (None where the model is replayed from its estimates: every fit but
+    that of a model with effects)."""
     from study.identify.fit import identify
 
     ident = identify(model, structure, est_cfg, data.train.records, seed=seed,
@@ -424,8 +443,8 @@ def _identify_without_truth(model, structure, est_cfg: dict, conf: dict, data: F
 
 def _validate_or_skip(conf: dict, data: FileData, model, base, estimates: dict, replay, metrics: dict,
                       artefacts: dict):
-    """The validation records replayed (by ``replay``, else the model with ``estimates``), or the metrics that
-    say why not."""
+    """The validation records replayed (by ``replay``, else the model with ``estimates``), or the
+    metrics that say why not."""
     if data.validate is None:
         metrics["val_skipped"] = 1.0
         metrics["val_skipped_reason"] = ("no validation records (validate=null): no held-out replay was made; pass "
@@ -439,8 +458,8 @@ def _validate_or_skip(conf: dict, data: FileData, model, base, estimates: dict, 
 
 
 def run_on_records(conf: dict, data: FileData) -> dict:
-    """One run on the records ``data`` (from :func:`load`) with the composed configuration ``conf``; the same
-    result dict as ``study.run.pipeline.run_study``."""
+    """One run on the records ``data`` (from :func:`load`) with the composed configuration
+    ``conf``; the same result dict as ``study.run.pipeline.run_study``."""
     timings = {"read": data.seconds}
     seed = int(conf.get("seed", 0))
     parts = _components(conf)

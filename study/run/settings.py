@@ -1,21 +1,24 @@
 """Settings checked before any work: a value that makes no sense is refused, naming the setting.
 
-Zero does not mean "unset" (``null`` does): ``sim.dt=0`` or ``sim.duration=0`` used to run silently with the
-defaults, and a negative value failed deep inside numpy ("negative dimensions are not allowed") naming nothing.
-Each check here raises :class:`study.configuration.cli.ConfigError` (a ``ValueError``) with ``<setting>=<value>: expected
-<what>``, so every command refuses in one line with exit status 2 before it simulates, reads or writes anything.
+Zero does not mean "unset" (``null`` does): ``sim.dt=0`` or ``sim.duration=0`` used to run silently
+with the defaults, and a negative value failed deep inside numpy ("negative dimensions are not
+allowed") naming nothing. Each check here raises :class:`study.configuration.cli.ConfigError` (a
+``ValueError``) with ``<setting>=<value>: expected <what>``, so every command refuses in one line
+with exit status 2 before it simulates, reads or writes anything.
 
-- :func:`check_run`: a study run (``python -m study``; the sweeper checks every composed job of a sweep with it
-  before launching any).
-- :func:`check_simulate`: ``python -m study simulate`` (also that ``out=`` is given, is a record file and is not
-  there already).
-- :func:`check_diagnose`: ``python -m study diagnose`` (``train=`` and ``out=`` given, the doctor's thresholds).
+- :func:`check_run`: a study run (``python -m study``; the sweeper checks every composed job of a
+  sweep with it before launching any).
+- :func:`check_simulate`: ``python -m study simulate`` (also that ``out=`` is given, is a record
+  file and is not there already).
+- :func:`check_diagnose`: ``python -m study diagnose`` (``train=`` and ``out=`` given, the doctor's
+  thresholds).
 
-Every enumerated setting of every command is in one table, :data:`ENUMS`, checked by :func:`check_enums` (a value
-outside it used to act like another one: the doctor's ``checks=eror`` as ``warn``). Settings that make a run
-impossible together (an integration step longer than the ship's time scale, a sampling interval shorter than the
-step) are checked against each other (:func:`check_together`), and the folders a command writes are proven
-writable (:func:`writable`) before any work.
+Every enumerated setting of every command is in one table, :data:`ENUMS`, checked by
+:func:`check_enums` (a value outside it used to act like another one: the doctor's ``checks=eror``
+as ``warn``). Settings that make a run impossible together (an integration step longer than the
+ship's time scale, a sampling interval shorter than the step) are checked against each other
+(:func:`check_together`), and the folders a command writes are proven writable (:func:`writable`)
+before any work.
 """
 from __future__ import annotations
 
@@ -35,8 +38,9 @@ def _is_number(x) -> bool:
 
 def number(conf: dict, key: str, *, minimum: float | None = None, above: float | None = None,
            below: float | None = None, optional: bool = True, integer: bool = False) -> None:
-    """Check the setting ``key`` (dotted) of ``conf``: a finite number (an integer if ``integer``), ``>= minimum``,
-    ``> above`` and ``< below`` where given; ``None``/absent passes when ``optional``."""
+    """Check the setting ``key`` (dotted) of ``conf``: a finite number (an integer if
+    ``integer``), ``>= minimum``, ``> above`` and ``< below`` where given; ``None``/absent passes
+    when ``optional``."""
     node = conf
     for part in key.split("."):
         node = node.get(part) if isinstance(node, dict) else None
@@ -110,8 +114,8 @@ def _get(conf: dict, key: str, absent=None):
 
 
 def check_enums(conf: dict, command: str) -> None:
-    """Each enumerated setting of ``command`` (:data:`ENUMS`) holds one of its values (a boolean a boolean:
-    ``force=maybe`` is not true)."""
+    """Each enumerated setting of ``command`` (:data:`ENUMS`) holds one of its values (a boolean
+    a boolean: ``force=maybe`` is not true)."""
     for key, (allowed, nullable) in ENUMS[command].items():
         v = _get(conf, key, absent=_ABSENT)
         if v is _ABSENT or (v is None and nullable):
@@ -127,8 +131,8 @@ _ABSENT = object()
 
 
 def check_state_options(conf: dict) -> None:
-    """The doctor's state estimator options: each standard deviation ``auto`` or a finite number > 0, the
-    process noise ``ml`` or ``{q_uv: ..., q_r: ...}``."""
+    """The doctor's state estimator options: each standard deviation ``auto`` or a finite number
+    > 0, the process noise ``ml`` or ``{q_uv: ..., q_r: ...}``."""
     so = conf.get("state_options")
     if so is None:
         return
@@ -152,9 +156,10 @@ def check_state_options(conf: dict) -> None:
 # --------------------------------------------------------------------------------------- writable folders
 
 def writable(path, setting: str, folder: bool = True) -> None:
-    """Prove that the folder ``path`` (a file's folder when not ``folder``) can be written, before any work:
-    a real file is created and removed in it or, when it is not there yet, in its nearest existing ancestor
-    (nothing is left behind). Refused naming the setting, the folder and the reason."""
+    """Prove that the folder ``path`` (a file's folder when not ``folder``) can be written,
+    before any work: a real file is created and removed in it or, when it is not there yet, in
+    its nearest existing ancestor (nothing is left behind). Refused naming the setting, the
+    folder and the reason."""
     import os
     import tempfile
 
@@ -181,7 +186,8 @@ _EFFECT_POSITIVE = ("rate_deg",)
 
 
 def check_simulation(conf: dict) -> None:
-    """What a simulated record depends on: seed, integration step and length, noise, depth, hidden effects."""
+    """What a simulated record depends on: seed, integration step and length, noise, depth,
+    hidden effects."""
     number(conf, "seed", minimum=0, integer=True)
     number(conf, "sim.dt", above=0)
     number(conf, "sim.duration", above=0)
@@ -222,8 +228,8 @@ def check_simulation(conf: dict) -> None:
 
 
 def _time_scale(conf: dict) -> tuple[float | None, float | None]:
-    """``(L/U0 [s], default integration step [s])`` of the configured vessel, (None, None) when it has no
-    length and speed."""
+    """``(L/U0 [s], default integration step [s])`` of the configured vessel, (None, None) when
+    it has no length and speed."""
     L, U0 = _get(conf, "vessel.particulars.Lpp"), _get(conf, "vessel.operation.U0")
     if not (_is_number(L) and _is_number(U0) and L > 0 and U0 > 0 and math.isfinite(L / U0)):
         return None, None
@@ -235,10 +241,10 @@ def _time_scale(conf: dict) -> tuple[float | None, float | None]:
 
 
 def check_together(conf: dict) -> None:
-    """Settings that make a simulation impossible together, checked against each other before any work: an
-    integration step longer than a tenth of the ship's time scale L/U0 (a manoeuvre is not resolved; the default
-    is about 1 %), a sampling interval shorter than the step (records are decimated from the simulation), or
-    both sampling intervals given."""
+    """Settings that make a simulation impossible together, checked against each other before any
+    work: an integration step longer than a tenth of the ship's time scale L/U0 (a manoeuvre is
+    not resolved; the default is about 1 %), a sampling interval shorter than the step (records
+    are decimated from the simulation), or both sampling intervals given."""
     nz = conf.get("noise") or {}
     if isinstance(nz, dict) and nz.get("sample_dt") is not None and nz.get("sample_dt_LU") is not None:
         raise ConfigError(f"noise.sample_dt={nz['sample_dt']} and noise.sample_dt_LU={nz['sample_dt_LU']}: expected "
@@ -267,9 +273,10 @@ _COUNT_NAMES = ("n_", "max_", "min_steps", "maxiter", "popsize", "target_ess", "
 
 
 def check_hyper_parameters(name: str, cls, params: dict, where: str) -> None:
-    """An estimator's hyper-parameters, of the kind its constructor's defaults say, before any work: a count
-    (``n_splits``, ``max_iter``, ``n_*``) a positive integer (cross-validation at least 2 folds), a boolean a
-    boolean, a number where the default is a number (or text where text is allowed), finite."""
+    """An estimator's hyper-parameters, of the kind its constructor's defaults say, before any
+    work: a count (``n_splits``, ``max_iter``, ``n_*``) a positive integer (cross-validation at
+    least 2 folds), a boolean a boolean, a number where the default is a number (or text where
+    text is allowed), finite."""
     import inspect
 
     defaults = {k: p.default for k, p in inspect.signature(cls.__init__).parameters.items()
@@ -296,7 +303,8 @@ def check_hyper_parameters(name: str, cls, params: dict, where: str) -> None:
 
 
 def _estimator_params(name: str, cfg: dict | None = None) -> list[str]:
-    """The hyper-parameters the estimator ``name`` (or its config ``cfg``) accepts: its class's constructor."""
+    """The hyper-parameters the estimator ``name`` (or its config ``cfg``) accepts: its class's
+    constructor."""
     from study.configuration.compose import read_config
     from study.identify.estimators import estimator_class, list_estimators
 
@@ -309,8 +317,9 @@ def _estimator_params(name: str, cfg: dict | None = None) -> list[str]:
 
 
 def check_estimator(conf: dict) -> None:
-    """``estimator.params`` and ``estimator_overrides``: every name must be an estimator and one of its
-    hyper-parameters (a misspelt one used to be ignored, or to fail the run only when that estimator ran)."""
+    """``estimator.params`` and ``estimator_overrides``: every name must be an estimator and one
+    of its hyper-parameters (a misspelt one used to be ignored, or to fail the run only when that
+    estimator ran)."""
     from study.identify.estimators import estimator_class
 
     est = conf.get("estimator") or {}
@@ -343,9 +352,10 @@ def check_estimator(conf: dict) -> None:
 # ---------------------------------------------------------------------------------------------- commands
 
 def check_run(conf: dict) -> None:
-    """A study run's configuration (``python -m study``): every value, the enumerated settings, the number of
-    replicates, the settings that must fit together (a simulated run), the estimator's hyper-parameters and the
-    classes the configuration names (the trusted-code boundary, before anything is imported)."""
+    """A study run's configuration (``python -m study``): every value, the enumerated settings,
+    the number of replicates, the settings that must fit together (a simulated run), the
+    estimator's hyper-parameters and the classes the configuration names (the trusted-code
+    boundary, before anything is imported)."""
     from study.configuration.compose import check_targets
 
     check_targets({k: v for k, v in conf.items() if k != "hydra"})
@@ -358,8 +368,8 @@ def check_run(conf: dict) -> None:
 
 
 def check_replicates(conf: dict) -> None:
-    """``replicates``: how many independent datasets a job identifies, a whole number >= 1; the user's own
-    records (``train=``) are one dataset."""
+    """``replicates``: how many independent datasets a job identifies, a whole number >= 1; the
+    user's own records (``train=``) are one dataset."""
     n = conf.get("replicates", 1)
     if n is None or isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise ConfigError(f"replicates={n!r}: expected a whole number >= 1 (independent datasets of the run)")
@@ -369,8 +379,8 @@ def check_replicates(conf: dict) -> None:
 
 
 def check_simulate(conf: dict) -> Path:
-    """``python -m study simulate``: the simulation's settings and the output file (given, a record file type,
-    not there unless ``overwrite=true``). Returns the output path."""
+    """``python -m study simulate``: the simulation's settings and the output file (given, a
+    record file type, not there unless ``overwrite=true``). Returns the output path."""
     from study.records.schema import SUPPORTED
 
     required(conf, "out", "the record file to write (out=<file.csv|file.parquet>)")
@@ -395,8 +405,9 @@ REPORT_FILES = ("report.json", "report.html", "figures")
 
 
 def existing_report(out: Path) -> list[str]:
-    """The report files already in ``out`` (empty when there are none). An empty ``figures/`` is no report (a
-    doctor stopped before it wrote one left it; the figures are written to a temporary folder and moved in)."""
+    """The report files already in ``out`` (empty when there are none). An empty ``figures/`` is
+    no report (a doctor stopped before it wrote one left it; the figures are written to a
+    temporary folder and moved in)."""
     def there(n):
         p = out / n
         return p.is_dir() and any(p.iterdir()) if n == "figures" else p.exists()
@@ -404,8 +415,8 @@ def existing_report(out: Path) -> list[str]:
 
 
 def check_diagnose(conf: dict) -> Path:
-    """``python -m study diagnose``: records and output given, the output folder holds no report (unless
-    ``overwrite=true``), the doctor's thresholds in range. Returns the output folder."""
+    """``python -m study diagnose``: records and output given, the output folder holds no report
+    (unless ``overwrite=true``), the doctor's thresholds in range. Returns the output folder."""
     required(conf, "train", "the training records (train=<file|folder|glob>)")
     required(conf, "out", "the report folder to write (out=<folder>)")
     check_enums(conf, "study diagnose")
@@ -432,8 +443,9 @@ def check_diagnose(conf: dict) -> Path:
 
 
 def check_candidates(conf: dict) -> None:
-    """The doctor's effect folders exist, its candidates and the model's effects are effects of the catalogue,
-    and each names a class of the package or of an effect folder (checked before anything is imported)."""
+    """The doctor's effect folders exist, its candidates and the model's effects are effects of
+    the catalogue, and each names a class of the package or of an effect folder (checked before
+    anything is imported)."""
     from study.configuration.compose import check_target
     from study.identify.effects import effect_config, effect_dirs, list_effects
 

@@ -6,12 +6,14 @@ Public entry points::
     vessel = load_vessel("kvlcc2", effects=[ShallowWater(h_T=1.5)])
     df = simulate(vessel, "zigzag_10_10")          # a schema DataFrame (see docs/schema.md)
 
-A vessel *kind* is a module with ``KIND``, ``PARAM_NAMES``, ``COEFF_SECTION``, ``LINEAR_DERIVATIVES``,
-``accel`` (numba) and ``pack(cfg)``; optionally ``ADDED_MASS_KEYS``, ``solve_n(params, U0)`` for
-self-propulsion, and ``KINEMATIC_SWAY = False`` with ``aux_state_at_rest(P, delta)`` for a model without a
-sway velocity that carries an auxiliary state in the integrator's ``v_w`` slot instead (``nomoto``: see
-``study.sim.core``). Kinds are listed in ``KINDS`` (``kinds.py``); adding one is one module plus one line there.
-Manoeuvres (``study.sim.maneuvers``) and configs (``study.configuration.compose``) come from the layer below: this package only
+A vessel *kind* is a module with ``KIND``, ``PARAM_NAMES``, ``COEFF_SECTION``,
+``LINEAR_DERIVATIVES``, ``accel`` (numba) and ``pack(cfg)``; optionally ``ADDED_MASS_KEYS``,
+``solve_n(params, U0)`` for self-propulsion, and ``KINEMATIC_SWAY = False`` with
+``aux_state_at_rest(P, delta)`` for a model without a sway velocity that carries an auxiliary state
+in the integrator's ``v_w`` slot instead (``nomoto``: see ``study.sim.core``). Kinds are listed in
+``KINDS`` (``kinds.py``); adding one is one module plus one line there. Manoeuvres
+(``study.sim.maneuvers``) and configs (``study.configuration.compose``) come from the layer below:
+this package only
 simulates.
 """
 from __future__ import annotations
@@ -38,7 +40,8 @@ def integrator(kind_name: str):
 
 @dataclass
 class Vessel:
-    """A vessel ready to simulate: its config (after effects), kind, packed parameters, operating point."""
+    """A vessel ready to simulate: its config (after effects), kind, packed parameters, operating
+    point."""
 
     name: str
     kind_name: str
@@ -101,7 +104,8 @@ def load_vessel(vessel, effects=()) -> Vessel:
 
 
 def default_dt(vessel: Vessel) -> float:
-    """Integration step: about 1 % of the time to travel one ship length, on a 1-2-5 grid, at most 0.1 s."""
+    """Integration step: about 1 % of the time to travel one ship length, on a 1-2-5 grid, at
+    most 0.1 s."""
     target = min(0.1, 0.01 * vessel.L / vessel.U0)
     for dt in (0.1, 0.05, 0.02, 0.01, 0.005, 0.002, 0.001):
         if dt <= target * 1.0001:
@@ -111,7 +115,8 @@ def default_dt(vessel: Vessel) -> float:
 
 def run(vessel: Vessel, P: np.ndarray, y0: np.ndarray, dt: float, nsteps: int, cmd: np.ndarray,
         nprop: np.ndarray, ctrl: np.ndarray, save_every: int = 1) -> np.ndarray:
-    """Low-level batch call: P (n_params, B), y0 (6, B) -> output (n_out, 9, B), columns ``OUT_NAMES``."""
+    """Low-level batch call: P (n_params, B), y0 (6, B) -> output (n_out, 9, B), columns
+    ``OUT_NAMES``."""
     P = np.ascontiguousarray(P, dtype=np.float64)
     if P.ndim == 1:
         P = P[:, None]
@@ -133,8 +138,8 @@ def initial_state(vessel: Vessel, u0: float | None = None, psi0: float = 0.0) ->
 
 
 def _aux_at_rest(vessel: Vessel, P: np.ndarray, y0: np.ndarray, delta0: float) -> np.ndarray:
-    """y0 with the ``v_w`` slot set to the kind's auxiliary state at rest, for a kind whose ``v_w`` is not a
-    sway velocity (``KINEMATIC_SWAY = False``, e.g. ``nomoto``); other kinds: y0 unchanged.
+    """y0 with the ``v_w`` slot set to the kind's auxiliary state at rest, for a kind whose ``v_w``
+    is not a sway velocity (``KINEMATIC_SWAY = False``, e.g. ``nomoto``); other kinds: y0 unchanged.
 
     The initial rudder of the integrator is the first command clipped to each member's delta_max.
     """
@@ -162,10 +167,12 @@ def to_frame(out: np.ndarray, t: np.ndarray, member: int = 0) -> pd.DataFrame:
 def simulate(vessel, maneuver, effects=(), dt: float | None = None, sample_dt: float | None = None,
              duration: float | None = None, u0: float | None = None, psi0: float = 0.0,
              seed: int = 0) -> pd.DataFrame:
-    """Simulate one manoeuvre of one vessel; returns a clean schema DataFrame (no measurement noise).
+    """Simulate one manoeuvre of one vessel; returns a clean schema DataFrame (no measurement
+    noise).
 
     vessel : name, config dict or :class:`Vessel`; maneuver : name, config dict or
-    :class:`study.sim.maneuvers.Maneuver`. ``sample_dt`` (default: ``dt``) must be a multiple of ``dt``.
+    :class:`study.sim.maneuvers.Maneuver`. ``sample_dt`` (default: ``dt``) must be a multiple of
+    ``dt``.
     """
     from study.sim import maneuvers
 
@@ -192,11 +199,12 @@ def simulate(vessel, maneuver, effects=(), dt: float | None = None, sample_dt: f
 
 def simulate_batch(vessel: Vessel, maneuver, P: np.ndarray, dt: float | None = None,
                    duration: float | None = None, seed: int = 0):
-    """One manoeuvre for every column of the parameter matrix ``P`` (n_params, B) in one compiled call, each
-    member closing its own zigzag/turning controller on its own heading (e.g. posterior draws of a model).
+    """One manoeuvre for every column of the parameter matrix ``P`` (n_params, B) in one compiled
+    call, each member closing its own zigzag/turning controller on its own heading (e.g. posterior
+    draws of a model).
 
-    Returns ``(t, out)`` with ``out`` of shape (n, 9, B) in the order of ``study.sim.core.OUT_NAMES``; the
-    propeller runs at ``vessel.n0`` for every member.
+    Returns ``(t, out)`` with ``out`` of shape (n, 9, B) in the order of
+    ``study.sim.core.OUT_NAMES``; the propeller runs at ``vessel.n0`` for every member.
     """
     from study.sim import maneuvers
 
@@ -216,11 +224,12 @@ def replay(vessel: Vessel, time: np.ndarray, delta: np.ndarray, n: np.ndarray, s
            substeps: int = 1) -> np.ndarray:
     """Simulate with measured inputs (open loop) on a record's uniform time base.
 
-    ``delta`` is applied as the rudder command: with the vessel's rudder rate, lag and delay (set them to 0
-    to apply the measured angle directly). ``state0`` = [u_w, v_w, r, x0, y0, psi]. Returns (n, 9, B).
-    For a kind whose ``v_w`` slot is not a sway velocity (``KINEMATIC_SWAY = False``: ``nomoto``) the given
-    v_w is ignored: the slot starts at the kind's auxiliary state at rest (r' = 0) for the first rudder angle
-    (a record's ``v`` is the drift over ground, not that state).
+    ``delta`` is applied as the rudder command: with the vessel's rudder rate, lag and delay (set
+    them to 0 to apply the measured angle directly). ``state0`` = [u_w, v_w, r, x0, y0, psi].
+    Returns (n, 9, B). For a kind whose ``v_w`` slot is not a sway velocity (``KINEMATIC_SWAY =
+    False``: ``nomoto``) the given v_w is ignored: the slot starts at the kind's auxiliary state at
+    rest (r' = 0) for the first rudder angle (a record's ``v`` is the drift over ground, not that
+    state).
     """
     time = np.asarray(time, float)
     dts = np.diff(time)
@@ -247,10 +256,11 @@ def _wind_kernel():
 
 
 def wind_forces(vessel: Vessel, u_w, v_w, psi, speed, direction) -> np.ndarray:
-    """Wind forces [N, N, N m] in body axes, (N, 3), of ``vessel``'s windage and wind coefficients for a true
-    wind of ``speed`` [m/s] from ``direction`` [rad] (scalars or per-sample arrays), the ship moving at the
-    water-relative ``u_w, v_w`` with heading ``psi`` (and the vessel's current, if any) -- the same compiled
-    function the integrator uses (Fossen 2011, Sec. 8.1)."""
+    """Wind forces [N, N, N m] in body axes, (N, 3), of ``vessel``'s windage and wind
+    coefficients for a true wind of ``speed`` [m/s] from ``direction`` [rad] (scalars or
+    per-sample arrays), the ship moving at the water-relative ``u_w, v_w`` with heading ``psi``
+    (and the vessel's current, if any) -- the same compiled function the integrator uses (Fossen
+    2011, Sec. 8.1)."""
     n = len(np.asarray(u_w))
     arr = [np.ascontiguousarray(np.broadcast_to(np.asarray(a, float), (n,))) for a in (u_w, v_w, psi, speed,
                                                                                        direction)]
@@ -269,7 +279,8 @@ def _accel_kernel(kind_name: str):
 
 
 def accelerations(vessel: Vessel, P: np.ndarray, u, v, r, delta, n, ext=None) -> np.ndarray:
-    """Accelerations (du, dv, dr) of the kind's equations of motion at given states, for each column of P.
+    """Accelerations (du, dv, dr) of the kind's equations of motion at given states, for each column
+    of P.
 
     P : (n_params, B); ext : (3, B) external forces [N, N, N m] or None. Returns (B, N, 3). Used to build
     regressors of any kind without re-deriving its force model (see ``study.identify.regression``).

@@ -1,13 +1,14 @@
-"""Abkowitz-type third-order manoeuvring model, in the form of Fossen's Mariner model (MSS ``mariner.m``).
+"""Abkowitz-type third-order manoeuvring model, in the form of Fossen's Mariner model (MSS
+``mariner.m``).
 
 Source of the model and of its coefficients:
-  Chislett, M.S., Stroem-Tejsen, J. (1965). Planar Motion Mechanism Tests and Full-Scale Steering and
-  Manoeuvring Predictions for a Mariner Class Vessel. Technical Report Hy-5 (as cited by mariner.m),
-  Hydro- and Aerodynamics Laboratory, Lyngby, Denmark; journal version in International Shipbuilding Progress
-  12(129), 1965 (not checked here).
-  As implemented by T. Lauvdal and T.I. Fossen in the Marine Systems Simulator: ``mariner.m`` (MSS,
-  github.com/cybergalactic/MSS, file CRAFT/SHIP/models/mariner.m, revision 2024-04-19; also VESSELS/mariner.m);
-  Fossen, T.I. (2011). Handbook of Marine Craft Hydrodynamics and Motion Control, Wiley (Mariner class vessel).
+  Chislett, M.S., Stroem-Tejsen, J. (1965). Planar Motion Mechanism Tests and Full-Scale Steering
+  and Manoeuvring Predictions for a Mariner Class Vessel. Technical Report Hy-5 (as cited by
+  mariner.m), Hydro- and Aerodynamics Laboratory, Lyngby, Denmark; journal version in International
+  Shipbuilding Progress 12(129), 1965 (not checked here). As implemented by T. Lauvdal and T.I.
+  Fossen in the Marine Systems Simulator: ``mariner.m`` (MSS, github.com/cybergalactic/MSS, file
+  CRAFT/SHIP/models/mariner.m, revision 2024-04-19; also VESSELS/mariner.m); Fossen, T.I. (2011).
+  Handbook of Marine Craft Hydrodynamics and Motion Control, Wiley (Mariner class vessel).
 
 Non-dimensionalisation (SNAME prime system with L and the instantaneous speed U = sqrt(u^2 + v^2)):
   u' = (u - U0) / U  (the surge *perturbation* about the nominal speed U0, as in mariner.m),
@@ -20,21 +21,23 @@ Equations (mariner.m):
   [m' - Y'vdot,        m' x'G - Y'rdot] [dv'/dt']   [Y']
   [m' x'G - N'vdot,    I'z - N'rdot   ] [dr'/dt'] = [N']
 with the force polynomials (delta_a = rudder angle in the model's own sign)
-  X' = Xu u + Xuu u^2 + Xuuu u^3 + Xvv v^2 + Xrr r^2 + Xrv r v + Xdd d^2 + Xudd u d^2 + Xvd v d + Xuvd u v d
-  Y' = Yv v + Yr r + Yvvv v^3 + Yvvr v^2 r + Yvu v u + Yru r u + Yd d + Yddd d^3 + Yud u d + Yuud u^2 d
+  X' = Xu u + Xuu u^2 + Xuuu u^3 + Xvv v^2 + Xrr r^2 + Xrv r v + Xdd d^2 + Xudd u d^2 + Xvd v d +
+  Xuvd u v d Y' = Yv v + Yr r + Yvvv v^3 + Yvvr v^2 r + Yvu v u + Yru r u + Yd d + Yddd d^3 + Yud u
+  d + Yuud u^2 d
        + Yvdd v d^2 + Yvvd v^2 d + (Y0 + Y0u u + Y0uu u^2)
   N' = the same terms with N.
-The rigid-body centripetal terms are contained in the coefficients (Xrv = m'; Yr, Nr include -m', -m' x'G),
-so there are no separate Coriolis terms. Y0, N0 (and their u-terms) are the constant side force and yaw moment
-of the propeller (an asymmetry: with delta = 0 the ship turns slowly).
+The rigid-body centripetal terms are contained in the coefficients (Xrv = m'; Yr, Nr include -m',
+-m' x'G), so there are no separate Coriolis terms. Y0, N0 (and their u-terms) are the constant side
+force and yaw moment of the propeller (an asymmetry: with delta = 0 the ship turns slowly).
 
-SIGN CONVERSION: in the model's own sign a positive rudder angle gives a negative yaw moment (N'd < 0), a turn
-to port; mariner.m therefore takes delta_c = -ui. This package's delta > 0 turns to starboard, so the model's
-rudder angle is delta_a = -delta (the same as mariner.m's ``delta_c = -ui``).
+SIGN CONVERSION: in the model's own sign a positive rudder angle gives a negative yaw moment (N'd <
+0), a turn to port; mariner.m therefore takes delta_c = -ui. This package's delta > 0 turns to
+starboard, so the model's rudder angle is delta_a = -delta (the same as mariner.m's ``delta_c =
+-ui``).
 
-The external forces Xe, Ye [N], Ne [N m] of the integrator are added dimensionally (masses from the primes with
-the config's rho). No propeller input: ``n`` is unused (the surge equation is the Abkowitz polynomial in the
-speed perturbation, with zero net force at u = U0 by construction).
+The external forces Xe, Ye [N], Ne [N m] of the integrator are added dimensionally (masses from the
+primes with the config's rho). No propeller input: ``n`` is unused (the surge equation is the
+Abkowitz polynomial in the speed perturbation, with zero net force at u = U0 by construction).
 """
 from __future__ import annotations
 
@@ -122,10 +125,11 @@ def accel(u, v, r, delta, n, Xe, Ye, Ne, P, b):
 
 
 def pack(vessel: dict) -> np.ndarray:
-    """Resolved vessel config -> parameter vector in ``PARAM_NAMES`` order (rho, L, U0 in SI; the rest prime).
+    """Resolved vessel config -> parameter vector in ``PARAM_NAMES`` order (rho, L, U0 in SI; the
+    rest prime).
 
-    The model's own m', x'G (``hull``) drive the dynamics; ``particulars`` (mass or volume, xG) must agree
-    with them (checked to 1 %), so that an edit of one is not silently ignored.
+    The model's own m', x'G (``hull``) drive the dynamics; ``particulars`` (mass or volume, xG) must
+    agree with them (checked to 1 %), so that an edit of one is not silently ignored.
     """
     p = vessel["particulars"]
     rho = float(p["rho"])

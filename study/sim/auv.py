@@ -2,8 +2,8 @@
 
 Du, W., Xu, F., Xiao, T., Yang, L., Wang, M., Du, X. (2016). Online modeling of underwater vehicles'
 maneuvering motion by using support vector machine. Ship Science and Technology 38(6), 81-85
-(``/work/shared/seeds/003_*.txt``), after Silvestre & Pascoal (1997), Trans. Inst. Meas. Control 19(3),
-126-138 (the MARIUS AUV). Equation numbers below are the seed's.
+(``/work/shared/seeds/003_*.txt``), after Silvestre & Pascoal (1997), Trans. Inst. Meas. Control
+19(3), 126-138 (the MARIUS AUV). Equation numbers below are the seed's.
 
 Equations of motion (eq. 1 restricted to the horizontal plane, y_G = 0)::
 
@@ -19,19 +19,21 @@ Hull (eq. 3), a prime system built on L and the surge speed u (not U)::
     N_H = 0.5 rho [L^4 N'r u r + L^3 N'v u v + L^6 N'rrr r^3 / u + L^5 N'r|r| r|r| + L^3 N'v|v| v|v|
                    + L^4 N'vdot dv/dt + L^5 N'rdot dr/dt]
 
-Rudder (eq. 4): X_d = 0.5 rho L^2 u^2 X'dd d^2, Y_d = 0.5 rho L^2 u^2 Y'd d, N_d = 0.5 rho L^3 u^2 N'd d
-(the seed prints L^2 in N_d; a moment needs L^3, as in every other N term of eq. 3).
+Rudder (eq. 4): X_d = 0.5 rho L^2 u^2 X'dd d^2, Y_d = 0.5 rho L^2 u^2 Y'd d, N_d = 0.5 rho L^3 u^2
+N'd d (the seed prints L^2 in N_d; a moment needs L^3, as in every other N term of eq. 3).
 
-Propeller (eq. 5): X_P = 0.5 rho L^2 u^2 X'p with X'p = eta 8 pi n Q_p / (rho L^2 u^3), i.e.
-X_P = 4 pi eta n Q_p / u. (This is twice the textbook eta P / u with shaft power P = 2 pi n Q; it is kept as
-printed, so Q_p here is a propulsion constant fitted with it, not a measured torque.) Below u_min = 0.05 U0
-the 1/u of the propeller and of the r^3/u terms is held at 1/u_min (the model is for forward motion only).
+Propeller (eq. 5): X_P = 0.5 rho L^2 u^2 X'p with X'p = eta 8 pi n Q_p / (rho L^2 u^3), i.e. X_P = 4
+pi eta n Q_p / u. (This is twice the textbook eta P / u with shaft power P = 2 pi n Q; it is kept as
+printed, so Q_p here is a propulsion constant fitted with it, not a measured torque.) Below u_min =
+0.05 U0 the 1/u of the propeller and of the r^3/u terms is held at 1/u_min (the model is for forward
+motion only).
 
-SIGN CONVERSION: the coefficient set in the configs (REMUS 100, Prestero 2001) uses the convention in which a
-positive rudder angle gives a positive side force at the stern (Y'd > 0, N'd < 0), a turn to port. This
-package's delta > 0 turns to starboard, so the model's rudder angle is d = -delta.
+SIGN CONVERSION: the coefficient set in the configs (REMUS 100, Prestero 2001) uses the convention
+in which a positive rudder angle gives a positive side force at the stern (Y'd > 0, N'd < 0), a turn
+to port. This package's delta > 0 turns to starboard, so the model's rudder angle is d = -delta.
 
-The integrator's ``n`` is the propeller speed [rev/s]; ``solve_n`` gives the n of a straight run at U0.
+The integrator's ``n`` is the propeller speed [rev/s]; ``solve_n`` gives the n of a straight run at
+U0.
 """
 from __future__ import annotations
 
@@ -124,7 +126,8 @@ def accel(u, v, r, delta, n, Xe, Ye, Ne, P, b):
 
 
 def pack(vessel: dict) -> np.ndarray:
-    """Resolved vessel config -> parameter vector in ``PARAM_NAMES`` order (SI; hull/rudder non-dimensional)."""
+    """Resolved vessel config -> parameter vector in ``PARAM_NAMES`` order (SI; hull/rudder
+    non-dimensional)."""
     p = vessel["particulars"]
     rho, L, m, Iz = mass_and_inertia(vessel)
     h = vessel["hull"]
@@ -137,7 +140,8 @@ def pack(vessel: dict) -> np.ndarray:
 
 
 def solve_n(params: np.ndarray, U0: float) -> float:
-    """Propeller speed [rev/s] of a straight run at U0: X_P = -0.5 rho L^2 X'uu U0^2 (eq. 3 and 5)."""
+    """Propeller speed [rev/s] of a straight run at U0: X_P = -0.5 rho L^2 X'uu U0^2 (eq. 3 and
+    5)."""
     rho, L, Xuu = params[I_RHO], params[I_L], params[I_XUU]
     eta, Qp = params[I_ETA], params[I_QP]
     if Xuu >= 0.0 or eta * Qp <= 0.0:

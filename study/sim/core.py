@@ -1,25 +1,27 @@
 """Fixed-step RK4 integrator shared by every vessel kind, with the manoeuvre controller, the rudder
 actuator and the environmental forces inside the compiled loop.
 
-Why a hand-written integrator instead of ``scipy.integrate.solve_ivp``: the zigzag controller switches the
-rudder on the simulated heading (a discontinuous, state-dependent input) and the rudder has a rate limit, a
-lag and a delay; DE and emcee simulate thousands of candidates, so the loop is compiled with numba and a whole
-population is advanced in lock-step in one call. ``benchmarks/bench_sim.py`` compares it with ``solve_ivp``.
+Why a hand-written integrator instead of ``scipy.integrate.solve_ivp``: the zigzag controller
+switches the rudder on the simulated heading (a discontinuous, state-dependent input) and the rudder
+has a rate limit, a lag and a delay; DE and emcee simulate thousands of candidates, so the loop is
+compiled with numba and a whole population is advanced in lock-step in one call.
+``benchmarks/bench_sim.py`` compares it with ``solve_ivp``.
 
-Layout of the per-member parameter matrix ``P`` (shape ``(n_params, batch)``, structure-of-arrays so that
-the inner loop over the batch is contiguous): first the vessel kind's own parameters (see each kind's
-``PARAM_NAMES``), then the environment and actuator parameters ``ENV_NAMES`` below. Every member of a batch
-may differ in any of them; that is what DE populations and emcee walkers need.
+Layout of the per-member parameter matrix ``P`` (shape ``(n_params, batch)``, structure-of-arrays so
+that the inner loop over the batch is contiguous): first the vessel kind's own parameters (see each
+kind's ``PARAM_NAMES``), then the environment and actuator parameters ``ENV_NAMES`` below. Every
+member of a batch may differ in any of them; that is what DE populations and emcee walkers need.
 
-State carried by the integrator: ``u_w, v_w`` (velocities relative to the water), ``r``, ``x0, y0``, ``psi``.
-Output columns (``OUT_NAMES``): ``u, v`` over ground (what GNSS measures), ``r``, ``x0``, ``y0``, ``psi``,
-``delta`` (the actual rudder angle), ``n``, ``delta_cmd`` (the steering gear's command),
-``delta`` (actual rudder angle), ``n``.
+State carried by the integrator: ``u_w, v_w`` (velocities relative to the water), ``r``, ``x0, y0``,
+``psi``. Output columns (``OUT_NAMES``): ``u, v`` over ground (what GNSS measures), ``r``, ``x0``,
+``y0``, ``psi``, ``delta`` (the actual rudder angle), ``n``, ``delta_cmd`` (the steering gear's
+command), ``delta`` (actual rudder angle), ``n``.
 
 A kind whose model has no sway velocity (``study.sim.nomoto``: a yaw response model) declares
-``KINEMATIC_SWAY = False`` and carries an auxiliary state of its own in the ``v_w`` slot: the kinematics and
-the wind then use v_w = 0, and the output ``v`` is the current's contribution only (a ship without drift).
-The flag is a compile-time constant of each kind's instance of the loop (LLVM removes the unused side).
+``KINEMATIC_SWAY = False`` and carries an auxiliary state of its own in the ``v_w`` slot: the
+kinematics and the wind then use v_w = 0, and the output ``v`` is the current's contribution only (a
+ship without drift). The flag is a compile-time constant of each kind's instance of the loop (LLVM
+removes the unused side).
 """
 from __future__ import annotations
 
@@ -67,10 +69,11 @@ _SIMD_MIN_BATCH = 8
 class _NoAliasCompiler(Compiler):
     """numba's standard pipeline, with the function's array arguments declared ``noalias`` to LLVM.
 
-    The member loops store into several per-member arrays and load from ``P``; without knowing that these do
-    not overlap, LLVM would need a run-time overlap check for every pair of them (hundreds: every row of ``P``
-    is a separate pointer) and gives up vectorising. ``_run`` is only called by ``integrate`` below, with
-    arrays it allocated itself plus the caller's ``out`` (written only) and inputs (read only).
+    The member loops store into several per-member arrays and load from ``P``; without knowing that
+    these do not overlap, LLVM would need a run-time overlap check for every pair of them (hundreds:
+    every row of ``P`` is a separate pointer) and gives up vectorising. ``_run`` is only called by
+    ``integrate`` below, with arrays it allocated itself plus the caller's ``out`` (written only)
+    and inputs (read only).
     """
 
     def define_pipelines(self):
@@ -80,11 +83,13 @@ class _NoAliasCompiler(Compiler):
 
 @njit(cache=False, inline="always", error_model="numpy")
 def _wind_forces(u_w, v_w, cp, sp, P, k0, b, ccd, scd, cwd, swd):
-    """Wind forces in body axes for member ``b`` (k0 = offset of the environment block); zero if no wind.
+    """Wind forces in body axes for member ``b`` (k0 = offset of the environment block); zero if no
+    wind.
 
-    cp, sp = cos/sin of the heading; ccd, scd = cos/sin of current_dir; cwd, swd = cos/sin of wind_dir.
-    Branch-free: the wind term is computed for every member and kept where wind_speed > 0. The wind angle
-    g = -atan2(v_rw, u_rw) only enters through cos g = u_rw / V, sin g = -v_rw / V, sin 2g = 2 sin g cos g.
+    cp, sp = cos/sin of the heading; ccd, scd = cos/sin of current_dir; cwd, swd = cos/sin of
+    wind_dir. Branch-free: the wind term is computed for every member and kept where wind_speed > 0.
+    The wind angle g = -atan2(v_rw, u_rw) only enters through cos g = u_rw / V, sin g = -v_rw / V,
+    sin 2g = 2 sin g cos g.
     """
     Vw = P[k0 + 2, b]
     Vc = P[k0 + 0, b]
@@ -108,15 +113,16 @@ def _wind_forces(u_w, v_w, cp, sp, P, k0, b, ccd, scd, cwd, swd):
 
 
 def _templates():
-    """The integrator's two functions, as templates: ``make_integrator`` instantiates them per vessel kind.
+    """The integrator's two functions, as templates: ``make_integrator`` instantiates them per
+    vessel kind.
 
-    They read the kind's ``ACCEL``, ``K0`` (offset of the environment block in ``P``) and ``KINEMATIC_SWAY``
-    (is ``v_w`` a sway velocity?) as globals (each instance gets its own globals dict) and ``_RUN`` likewise;
-    their only closure variable is ``fingerprint``,
-    which makes the on-disk cache key deterministic and specific to the kind and its sources (numba keys a
-    cached closure by its code and the pickled closure variables; a pickled dispatcher carries a random uuid,
-    so a closure over ``accel`` itself would never be found in the cache again). It is long because it holds
-    the time loop ``_run`` whole (see its docstring).
+    They read the kind's ``ACCEL``, ``K0`` (offset of the environment block in ``P``) and
+    ``KINEMATIC_SWAY`` (is ``v_w`` a sway velocity?) as globals (each instance gets its own globals
+    dict) and ``_RUN`` likewise; their only closure variable is ``fingerprint``, which makes the
+    on-disk cache key deterministic and specific to the kind and its sources (numba keys a cached
+    closure by its code and the pickled closure variables; a pickled dispatcher carries a random
+    uuid, so a closure over ``accel`` itself would never be found in the cache again). It is long
+    because it holds the time loop ``_run`` whole (see its docstring).
     """
     fingerprint = 0
 
@@ -126,9 +132,10 @@ def _templates():
     def _run(P, dt, nsteps, save_every, cmd, nprop, ctrl, out, u, v, r, x, y, psi, delta,
              wu, wv, wr, wp, su, sv, sr, sx, sy, sp, D, C,
              sign, stage, nsw, psi_ref, started, pulled, hist, hist0):
-        """The time loop of ``integrate`` for a batch of members, compiled as one kernel. Kept whole: each step's
-        controller, actuator, output row and RK4 stages share the members' state arrays, the loop-invariant flags
-        (``has_current``, ``has_wind``) and the no-alias declaration of its array arguments."""
+        """The time loop of ``integrate`` for a batch of members, compiled as one kernel. Kept
+        whole: each step's controller, actuator, output row and RK4 stages share the members'
+        state arrays, the loop-invariant flags (``has_current``, ``has_wind``) and the no-alias
+        declaration of its array arguments."""
         if fingerprint < 0:  # never true; keeps the fingerprint a closure variable (part of the cache key)
             return -1
         k0 = K0
@@ -412,8 +419,9 @@ _RUN_TEMPLATE, _INTEGRATE_TEMPLATE = _templates()
 
 
 def _kind_tag(accel, n_kind_params: int, kinematic_sway: bool = True) -> str:
-    """A short stable name for a kind's integrator: its accel's module and qualname, its parameter count and
-    its ``KINEMATIC_SWAY`` flag (a compile-time constant of the loop, so it must be part of the cache key)."""
+    """A short stable name for a kind's integrator: its accel's module and qualname, its
+    parameter count and its ``KINEMATIC_SWAY`` flag (a compile-time constant of the loop, so it
+    must be part of the cache key)."""
     py = getattr(accel, "py_func", accel)
     h = hashlib.sha256(f"{py.__module__}.{py.__qualname__}:{n_kind_params}:{bool(kinematic_sway)}".encode())
     for cell in py.__closure__ or ():  # accel built by a factory: its closure values (repr) as well
@@ -424,10 +432,10 @@ def _kind_tag(accel, n_kind_params: int, kinematic_sway: bool = True) -> str:
 def _fingerprint(accel, n_kind_params: int, kinematic_sway: bool = True) -> int:
     """A hash of everything the compiled integrator of a kind depends on besides this file's code.
 
-    numba's cache checks this file's time stamp and the function's own code only; functions reached through
-    ``accel`` (the kind's module, ``fastmath``, shared helpers) are covered by hashing the sources of this
-    package (the controller codes of ``maneuvers.py`` among them) and of the kind's module, plus the kind's tag and
-    accel's code.
+    numba's cache checks this file's time stamp and the function's own code only; functions reached
+    through ``accel`` (the kind's module, ``fastmath``, shared helpers) are covered by hashing the
+    sources of this package (the controller codes of ``maneuvers.py`` among them) and of the kind's
+    module, plus the kind's tag and accel's code.
     """
     py = getattr(accel, "py_func", accel)
     h = hashlib.sha256(_kind_tag(accel, n_kind_params, kinematic_sway).encode())
@@ -443,7 +451,8 @@ def _fingerprint(accel, n_kind_params: int, kinematic_sway: bool = True) -> int:
 
 
 def _instantiate(template, tag, fingerprint, **names):
-    """A copy of ``template`` with its own globals (``names`` added) and ``fingerprint`` as closure cell."""
+    """A copy of ``template`` with its own globals (``names`` added) and ``fingerprint`` as
+    closure cell."""
     assert template.__code__.co_freevars == ("fingerprint",)
     g = dict(globals())
     g.update(names)
@@ -464,32 +473,36 @@ def make_integrator(accel, n_kind_params, kinematic_sway: bool = True):
     ----------
     accel : numba-jitted function
         ``accel(u_w, v_w, r, delta, n, X_ext, Y_ext, N_ext, P, b) -> (du_w, dv_w, dr)``: the kind's
-        equations of motion in water-relative velocities, with external forces in newtons (newton-metres).
-        Any such function works. Written branch-free with ``study.sim.fastmath`` and without loads under a
-        condition (as ``study.sim.mmg`` is), the loop over the batch vectorises (AVX2/AVX-512); with
-        ``math.*`` calls or data-dependent branches it runs member after member, with the same results.
+        equations of motion in water-relative velocities, with external forces in newtons
+        (newton-metres). Any such function works. Written branch-free with ``study.sim.fastmath``
+        and without loads under a condition (as ``study.sim.mmg`` is), the loop over the batch
+        vectorises (AVX2/AVX-512); with ``math.*`` calls or data-dependent branches it runs member
+        after member, with the same results.
     n_kind_params : int
         Number of the kind's own parameters; the environment block starts there.
     kinematic_sway : bool
-        The kind's ``KINEMATIC_SWAY`` (default True: ``v_w`` is the sway velocity through the water). False:
-        ``v_w`` is an auxiliary state of the kind's model (integrated like the others, e.g. the Nomoto
-        second-order state of ``study.sim.nomoto``); the kinematics, the wind and the output ``v`` then take
-        the sway velocity as 0. A constant of the compiled loop: the other kinds' code is unchanged.
+        The kind's ``KINEMATIC_SWAY`` (default True: ``v_w`` is the sway velocity through the
+        water). False: ``v_w`` is an auxiliary state of the kind's model (integrated like the
+        others, e.g. the Nomoto second-order state of ``study.sim.nomoto``); the kinematics, the
+        wind and the output ``v`` then take the sway velocity as 0. A constant of the compiled loop:
+        the other kinds' code is unchanged.
 
     Returns the compiled ``integrate(y0, P, dt, nsteps, save_every, cmd, nprop, ctrl, out)``; its
     attribute ``run_loop`` is the compiled time loop (``integrate.run_loop.inspect_asm(...)``).
 
-    Structure of one step: the controller and the rudder actuator (per-member switching, a dead-time ring
-    buffer) run in a scalar loop over the members. Then, for a batch (8 members or more), each of the four
-    RK4 stages is one loop over the members that reads the stage input from, and adds the stage derivative
-    into, per-member arrays -- straight-line code per member, unit-stride loads of ``P[i, b]``, so LLVM
-    vectorises it (check with ``integrate.run_loop_asm()``); a last loop forms the new state. For fewer
-    members (a single simulation), each member runs its four stages in a loop that keeps the stage input in
-    registers. Either way the arithmetic per member is that of the textbook RK4 step, in the same order, and
-    ``accel`` has one call site per path (it is inlined, so each copy costs compile time).
+    Structure of one step: the controller and the rudder actuator (per-member switching, a dead-time
+    ring buffer) run in a scalar loop over the members. Then, for a batch (8 members or more), each
+    of the four RK4 stages is one loop over the members that reads the stage input from, and adds
+    the stage derivative into, per-member arrays -- straight-line code per member, unit-stride loads
+    of ``P[i, b]``, so LLVM vectorises it (check with ``integrate.run_loop_asm()``); a last loop
+    forms the new state. For fewer members (a single simulation), each member runs its four stages
+    in a loop that keeps the stage input in registers. Either way the arithmetic per member is that
+    of the textbook RK4 step, in the same order, and ``accel`` has one call site per path (it is
+    inlined, so each copy costs compile time).
 
-    The compiled functions are cached on disk (``study/sim/__pycache__``), keyed on the sources of this
-    package and of the kind's module: the first call in a new process takes ~0.01 s instead of seconds.
+    The compiled functions are cached on disk (``study/sim/__pycache__``), keyed on the sources of
+    this package and of the kind's module: the first call in a new process takes ~0.01 s instead of
+    seconds.
     """
     kinematic_sway = bool(kinematic_sway)
     tag = _kind_tag(accel, n_kind_params, kinematic_sway)
@@ -505,11 +518,12 @@ def make_integrator(accel, n_kind_params, kinematic_sway: bool = True):
 
 
 def _kernel_templates():
-    """Two small compiled helpers outside the time loop, as templates like the integrator's (same globals and
-    ``fingerprint`` closure, so the same on-disk cache key): the accelerations of a kind at given states (the
-    regressors of every force model, and self-propulsion) and the wind forces. Compiled afresh in every process
-    before (a closure over a dispatcher is never found in numba's cache again), they cost 2-5 s per fresh
-    worker: most of a short run (``benchmarks/bench_sweep.py``)."""
+    """Two small compiled helpers outside the time loop, as templates like the integrator's (same
+    globals and ``fingerprint`` closure, so the same on-disk cache key): the accelerations of a
+    kind at given states (the regressors of every force model, and self-propulsion) and the wind
+    forces. Compiled afresh in every process before (a closure over a dispatcher is never found
+    in numba's cache again), they cost 2-5 s per fresh worker: most of a short run
+    (``benchmarks/bench_sweep.py``)."""
     fingerprint = 0
 
     def accel_kernel(u, v, r, d, n, ext, P, out):
@@ -546,16 +560,16 @@ _ACCEL_TEMPLATE, _WIND_TEMPLATE = _kernel_templates()
 
 
 def make_accel_kernel(accel, n_kind_params, kinematic_sway: bool = True):
-    """Compiled ``kernel(u, v, r, delta, n, ext, P, out)``: out[b, i] = accel(state i, member b), cached on disk
-    under the same key as the kind's integrator (``_fingerprint``)."""
+    """Compiled ``kernel(u, v, r, delta, n, ext, P, out)``: out[b, i] = accel(state i, member b),
+    cached on disk under the same key as the kind's integrator (``_fingerprint``)."""
     tag = _kind_tag(accel, n_kind_params, kinematic_sway)
     fp = _fingerprint(accel, n_kind_params, kinematic_sway)
     return njit(cache=True, error_model="numpy")(_instantiate(_ACCEL_TEMPLATE, tag, fp, ACCEL=accel))
 
 
 def make_wind_kernel():
-    """Compiled ``kernel(u_w, v_w, psi, Vw, wdir, P, k0, out)`` (wind forces of one member per sample), cached
-    on disk keyed on this package's sources."""
+    """Compiled ``kernel(u_w, v_w, psi, Vw, wdir, P, k0, out)`` (wind forces of one member per
+    sample), cached on disk keyed on this package's sources."""
     fp = _fingerprint(_wind_forces, 0, True)
     return njit(cache=True, error_model="numpy")(_instantiate(_WIND_TEMPLATE, "wind", fp))
 
@@ -563,11 +577,12 @@ def make_wind_kernel():
 def _run_loop_asm(run, n_kind_params: int) -> str:
     """Assembly of the compiled time loop, for the signature ``integrate`` uses.
 
-    To check that the member loop vectorised: packed instructions on zmm/ymm registers (``vfmadd...pd``,
-    ``vdivpd``, ``vsqrtpd``) in the loop body. Always compiled afresh (a few seconds), with numba's on-disk cache
-    off, for that one signature: numba keeps no assembly of code it loaded from its cache, and which overloads a
-    process compiled itself depends on what ran before and on the cache's state, so the answer must not come
-    from them (the two quickstart commands run one after the other, compile state differing, must both pass).
+    To check that the member loop vectorised: packed instructions on zmm/ymm registers
+    (``vfmadd...pd``, ``vdivpd``, ``vsqrtpd``) in the loop body. Always compiled afresh (a few
+    seconds), with numba's on-disk cache off, for that one signature: numba keeps no assembly of
+    code it loaded from its cache, and which overloads a process compiled itself depends on what ran
+    before and on the cache's state, so the answer must not come from them (the two quickstart
+    commands run one after the other, compile state differing, must both pass).
     """
     run = njit(cache=False, _nrt=False, pipeline_class=_NoAliasCompiler, **JIT_FLAGS)(run.py_func)
     B = 1

@@ -1,11 +1,12 @@
 """Environmental and actuator effects of the truth simulator, as separate, composable pieces.
 
 Each effect is a small dataclass with ``apply(vessel_cfg, env)``: it either transforms the vessel's
-coefficients (``shallow_water``) or sets entries of the environment/actuator parameter block that the
-compiled integrator reads (``current``, ``wind``, ``rudder_dynamics``, ``yaw_bias``). The model doctor uses
-the same classes as its candidate effects.
+coefficients (``shallow_water``) or sets entries of the environment/actuator parameter block that
+the compiled integrator reads (``current``, ``wind``, ``rudder_dynamics``, ``yaw_bias``). The model
+doctor uses the same classes as its candidate effects.
 
-Sources are given per effect; formulas are in ``../shared/reference/vessels.md`` as gathered for this project.
+Sources are given per effect; formulas are in ``../shared/reference/vessels.md`` as gathered for
+this project.
 """
 from __future__ import annotations
 
@@ -19,7 +20,8 @@ from .core import ENV_NAMES
 
 
 class NotApplicable(ValueError):
-    """An effect that cannot act on this vessel (a study records the run as skipped, with this message)."""
+    """An effect that cannot act on this vessel (a study records the run as skipped, with this
+    message)."""
 
 
 def default_env(vessel_cfg: dict) -> dict:
@@ -44,10 +46,12 @@ def default_env(vessel_cfg: dict) -> dict:
 
 @dataclass
 class Current:
-    """Uniform, irrotational current: hydrodynamics on water-relative velocities, drift in the kinematics.
+    """Uniform, irrotational current: hydrodynamics on water-relative velocities, drift in the
+    kinematics.
 
-    Fossen, T.I. (2011) Handbook of Marine Craft Hydrodynamics and Motion Control, Sec. 10.3 (Property 8.1
-    makes the equations of motion in relative velocity exact for a constant irrotational current).
+    Fossen, T.I. (2011) Handbook of Marine Craft Hydrodynamics and Motion Control, Sec. 10.3
+    (Property 8.1 makes the equations of motion in relative velocity exact for a constant
+    irrotational current).
 
     speed : m/s; direction_deg : direction the water flows TOWARDS, clockwise from north.
     """
@@ -90,11 +94,12 @@ class Wind:
 
 @dataclass
 class RudderDynamics:
-    """Steering gear: rate limit, first-order lag, dead time (any may be None = keep the vessel's value).
+    """Steering gear: rate limit, first-order lag, dead time (any may be None = keep the vessel's
+    value).
 
-    The rate limit follows the vessel's steering gear (IMO MSC.137(76): 35 deg to 30 deg the other side in
-    28 s, i.e. 2.32 deg/s, at full scale); lag and delay model a slow or late servo (ITTC 7.5-04-02-01 asks
-    for the rudder to be recorded because it is not the command).
+    The rate limit follows the vessel's steering gear (IMO MSC.137(76): 35 deg to 30 deg the other
+    side in 28 s, i.e. 2.32 deg/s, at full scale); lag and delay model a slow or late servo (ITTC
+    7.5-04-02-01 asks for the rudder to be recorded because it is not the command).
     """
 
     rate_deg: float | None = None
@@ -115,8 +120,9 @@ class RudderDynamics:
 class YawBias:
     """Constant body-fixed side force and yaw moment (propeller walk, hull or rudder asymmetry).
 
-    Given non-dimensionally (MMG convention: Y' = Y/(0.5 rho L d U0^2), N' = N/(0.5 rho L^2 d U0^2)) so that one
-    value means the same on any vessel. Assumption: the bias does not change with speed within a record.
+    Given non-dimensionally (MMG convention: Y' = Y/(0.5 rho L d U0^2), N' = N/(0.5 rho L^2 d U0^2))
+    so that one value means the same on any vessel. Assumption: the bias does not change with speed
+    within a record.
     """
 
     Y: float = 0.0
@@ -134,9 +140,9 @@ class YawBias:
 # ---------------------------------------------------------------------------------------------------------
 # Shallow water: factors on the deep-water coefficients, H = d/h.
 def _kijima_1990(h_T: float, vessel_cfg: dict) -> dict:
-    """Kijima, K., Nakiri, Y., Tsutsui, Y., Matsunaga, M. (1990) Prediction method of ship manoeuvrability
-    in deep and shallow waters. MARSIM & ICSM 90, Tokyo; as given by Maimun et al. (2011), Ocean Eng 38.
-    Linear hull derivatives Y'v, Y'r, N'v, N'r."""
+    """Kijima, K., Nakiri, Y., Tsutsui, Y., Matsunaga, M. (1990) Prediction method of ship
+    manoeuvrability in deep and shallow waters. MARSIM & ICSM 90, Tokyo; as given by Maimun et
+    al. (2011), Ocean Eng 38. Linear hull derivatives Y'v, Y'r, N'v, N'r."""
     p = vessel_cfg["particulars"]
     H = 1.0 / h_T
     B, d, L, Cb = float(p["B"]), float(p["d"]), float(p["Lpp"]), float(p["Cb"])
@@ -155,8 +161,8 @@ def _kijima_1990(h_T: float, vessel_cfg: dict) -> dict:
 
 
 def _ankudinov(h_T: float, vessel_cfg: dict) -> dict:
-    """Ankudinov et al. shallow-water factors as given in a public port of the DMI/FORCE ShipYard code
-    (collected in ../shared/reference/vessels.md; not checked against the original report).
+    """Ankudinov et al. shallow-water factors as given in a public port of the DMI/FORCE ShipYard
+    code (collected in ../shared/reference/vessels.md; not checked against the original report).
     Linear derivatives and added mass."""
     p = vessel_cfg["particulars"]
     F = h_T - 1.0
@@ -181,14 +187,15 @@ LINEAR_FORMULAS = {"kijima_1990": _kijima_1990, "ankudinov": _ankudinov}
 class ShallowWater:
     """Water depth as h/T: corrects hull derivatives and interaction coefficients.
 
-    ``formula`` picks the linear-derivative correction (default ``kijima_1990``; ``ankudinov`` selectable).
-    For MMG vessels the remaining coefficients follow Furukawa et al. (2016, MASHCON 4) and Tang et al.
-    (2020, Ocean Eng 195:106679): R'0, X'vv, X'vr, N'vvr, N'vrr, 1-t_P, 1-w_P, gamma_R (``interaction=True``).
-    Added mass: Ankudinov's factor when ``formula='ankudinov'``, otherwise unchanged (assumption, labelled:
-    the Kijima set gives no added-mass factor). ``h_T = None`` or ``inf`` is deep water (no change).
-    A kind without hull derivatives (``LINEAR_DERIVATIVES`` empty: ``nomoto``) raises a ValueError in shallow
-    water; the depth changes K and T of a real ship, and a Nomoto truth would need them from elsewhere.
-    Xu & Guedes Soares classes h/T > 3 deep, 1.5-3 medium, 1.2-1.5 shallow, < 1.2 very shallow.
+    ``formula`` picks the linear-derivative correction (default ``kijima_1990``; ``ankudinov``
+    selectable). For MMG vessels the remaining coefficients follow Furukawa et al. (2016, MASHCON 4)
+    and Tang et al. (2020, Ocean Eng 195:106679): R'0, X'vv, X'vr, N'vvr, N'vrr, 1-t_P, 1-w_P,
+    gamma_R (``interaction=True``). Added mass: Ankudinov's factor when ``formula='ankudinov'``,
+    otherwise unchanged (assumption, labelled: the Kijima set gives no added-mass factor). ``h_T =
+    None`` or ``inf`` is deep water (no change). A kind without hull derivatives
+    (``LINEAR_DERIVATIVES`` empty: ``nomoto``) raises a ValueError in shallow water; the depth
+    changes K and T of a real ship, and a Nomoto truth would need them from elsewhere. Xu & Guedes
+    Soares classes h/T > 3 deep, 1.5-3 medium, 1.2-1.5 shallow, < 1.2 very shallow.
     """
 
     h_T: float | None = None
@@ -254,7 +261,8 @@ def make_effect(name: str, **params):
 
 
 def apply_effects(vessel_cfg: dict, effects) -> tuple[dict, dict]:
-    """Return (modified copy of the vessel config, environment block) with the effects applied in order."""
+    """Return (modified copy of the vessel config, environment block) with the effects applied in
+    order."""
     vcfg = copy.deepcopy(vessel_cfg)
     env = default_env(vcfg)
     for eff in effects:

@@ -1,41 +1,45 @@
 """Branch-free double-precision ``exp``, ``sin``/``cos``/``sincos`` and ``atan2`` for numba.
 
-Why: numba lowers ``math.exp``/``sin``/``atan2`` to libm calls, and LLVM can only vectorise a loop that calls
-them when a vector math library (Intel SVML) is linked in; PyPI's llvmlite has none. These functions are pure
-arithmetic (multiply, fused multiply-add, add, divide, comparisons turned into selects, and a couple of
-integer bit operations through ``bitcast``), so a loop over a batch of ships that calls them vectorises
-(AVX2/AVX-512) like any other arithmetic loop; in scalar code they are about as fast as glibc's (latency on
-the development machine: sincos 14 ns vs 2 x ~20 ns, atan2 23 vs 22 ns, exp 17 vs 11 ns) and in a vectorised
-loop 1-2 ns per value. They are written for a short dependency chain (Estrin's scheme, no table lookups),
-because a single simulation is latency-bound.
+Why: numba lowers ``math.exp``/``sin``/``atan2`` to libm calls, and LLVM can only vectorise a loop
+that calls them when a vector math library (Intel SVML) is linked in; PyPI's llvmlite has none.
+These functions are pure arithmetic (multiply, fused multiply-add, add, divide, comparisons turned
+into selects, and a couple of integer bit operations through ``bitcast``), so a loop over a batch of
+ships that calls them vectorises (AVX2/AVX-512) like any other arithmetic loop; in scalar code they
+are about as fast as glibc's (latency on the development machine: sincos 14 ns vs 2 x ~20 ns, atan2
+23 vs 22 ns, exp 17 vs 11 ns) and in a vectorised loop 1-2 ns per value. They are written for a
+short dependency chain (Estrin's scheme, no table lookups), because a single simulation is
+latency-bound.
 
 Algorithms (range reduction + published minimax/rational approximants):
 
-* ``exp``: x = n ln2 + g with Cephes' two-part ln2 (Cody-Waite; Cephes ``exp.c``, S. L. Moshier, 1989,
-  *Methods and Programs for Mathematical Functions*, Prentice-Hall), e^g = 1 + g + g^2 u(g) with the
-  degree-10 minimax polynomial u of SLEEF's ``xexp`` (N. Shibata, F. Petrogalli, 2020, "SLEEF: A Portable
-  Vectorized Library of C Standard Mathematical Functions", IEEE TPDS 31(6), 1316-1327), evaluated by
-  Estrin's scheme; 2^n is built from the exponent bits, in two halves so that subnormal results are rounded
-  once (SLEEF's ``ldexp2k``).
-* ``sin``/``cos``: Cephes ``sin.c`` polynomials on [-pi/4, pi/4] (Estrin's scheme); the reduction by pi/2 is
-  Cody-Waite with fused multiply-adds (as SLEEF's FMA code paths do): x - q pi/2 with pi/2 in three parts, the
-  first step exact, accurate for |x| < 1e14 (``TRIG_MAX``). Beyond that (Payne-Hanek territory) the functions
-  return NaN rather than a wrong number; the simulator's angles are below 1e4 rad.
-* ``atan2``: Cephes ``atan.c`` rational approximant (degree 4/5 in t^2 on |t| <= 0.66), with the octant
-  reduction done on (|y|, |x|) by selects: t = min/max, and (lo - hi)/(lo + hi) above 0.66 (one division),
-  then pi/4, pi/2, 3pi/4, pi added as double-double constants. Signed zeros, infinities and NaN follow C99
-  Annex F (what ``math.atan2`` does).
+* ``exp``: x = n ln2 + g with Cephes' two-part ln2 (Cody-Waite; Cephes ``exp.c``, S. L. Moshier,
+  1989, *Methods and Programs for Mathematical Functions*, Prentice-Hall), e^g = 1 + g + g^2 u(g)
+  with the degree-10 minimax polynomial u of SLEEF's ``xexp`` (N. Shibata, F. Petrogalli, 2020,
+  "SLEEF: A Portable Vectorized Library of C Standard Mathematical Functions", IEEE TPDS 31(6),
+  1316-1327), evaluated by Estrin's scheme; 2^n is built from the exponent bits, in two halves so
+  that subnormal results are rounded once (SLEEF's ``ldexp2k``).
+* ``sin``/``cos``: Cephes ``sin.c`` polynomials on [-pi/4, pi/4] (Estrin's scheme); the reduction by
+  pi/2 is Cody-Waite with fused multiply-adds (as SLEEF's FMA code paths do): x - q pi/2 with pi/2
+  in three parts, the first step exact, accurate for |x| < 1e14 (``TRIG_MAX``). Beyond that
+  (Payne-Hanek territory) the functions return NaN rather than a wrong number; the simulator's
+  angles are below 1e4 rad.
+* ``atan2``: Cephes ``atan.c`` rational approximant (degree 4/5 in t^2 on |t| <= 0.66), with the
+  octant reduction done on (|y|, |x|) by selects: t = min/max, and (lo - hi)/(lo + hi) above 0.66
+  (one division), then pi/4, pi/2, 3pi/4, pi added as double-double constants. Signed zeros,
+  infinities and NaN follow C99 Annex F (what ``math.atan2`` does).
 
-Accuracy (``tests/sim/test_sim_speed_equivalence.py`` checks it against ``math`` on 1e5 random arguments per
-function over wide ranges and on edge cases; 1e6 samples give the same): exp within 1 ulp (incl. the
-subnormal range), sin/cos within 2 ulp on |x| < 1e14 (absolute 2.2e-16 near their zeros), atan2 within 1 ulp.
+Accuracy (``tests/sim/test_sim_speed_equivalence.py`` checks it against ``math`` on 1e5 random
+arguments per function over wide ranges and on edge cases; 1e6 samples give the same): exp within 1
+ulp (incl. the subnormal range), sin/cos within 2 ulp on |x| < 1e14 (absolute 2.2e-16 near their
+zeros), atan2 within 1 ulp.
 
-All functions are ``inline='always'`` numba functions with ``error_model='numpy'``: inside a compiled loop
-they are inlined into the caller's IR, so the caller's flags apply. Do not compile callers with the
-``reassoc``/``nnan``/``ninf``/``nsz`` fast-math flags: the Cody-Waite reduction, the round-to-integer trick and
-the special-value selects rely on IEEE semantics (``contract``, i.e. FMA formation, is fine). numba's on-disk
-cache of a function that inlines these does not notice an edit of this file (``study.sim.core`` keys its
-cache on this file's contents; for other cached callers, clear their ``__pycache__/*.nbi``).
+All functions are ``inline='always'`` numba functions with ``error_model='numpy'``: inside a
+compiled loop they are inlined into the caller's IR, so the caller's flags apply. Do not compile
+callers with the ``reassoc``/``nnan``/``ninf``/``nsz`` fast-math flags: the Cody-Waite reduction,
+the round-to-integer trick and the special-value selects rely on IEEE semantics (``contract``, i.e.
+FMA formation, is fine). numba's on-disk cache of a function that inlines these does not notice an
+edit of this file (``study.sim.core`` keys its cache on this file's contents; for other cached
+callers, clear their ``__pycache__/*.nbi``).
 """
 from __future__ import annotations
 
@@ -78,9 +82,10 @@ def _bits_f64(typingctx, i):
 def select(typingctx, cond, a, b):
     """``a if cond else b`` as one LLVM ``select`` instruction (both operands are evaluated).
 
-    A Python conditional expression becomes three basic blocks and a phi in numba's IR; LLVM usually turns
-    them back into a select, but numba's SSA and inlining passes pay for every block (compile time), and a
-    select cannot be turned into a branch that stops vectorisation. Operands are float64.
+    A Python conditional expression becomes three basic blocks and a phi in numba's IR; LLVM usually
+    turns them back into a select, but numba's SSA and inlining passes pay for every block (compile
+    time), and a select cannot be turned into a branch that stops vectorisation. Operands are
+    float64.
     """
     if not isinstance(cond, types.Boolean):
         return None
@@ -97,10 +102,11 @@ def select(typingctx, cond, a, b):
 
 @intrinsic
 def sqrt(typingctx, x):
-    """IEEE square root as the ``llvm.sqrt`` intrinsic (one instruction, vectorisable; NaN for x < 0).
+    """IEEE square root as the ``llvm.sqrt`` intrinsic (one instruction, vectorisable; NaN for x <
+    0).
 
-    ``math.sqrt`` becomes a libm call (it may set errno) unless LLVM can prove the argument non-negative,
-    and such a call stops a loop from vectorising.
+    ``math.sqrt`` becomes a libm call (it may set errno) unless LLVM can prove the argument
+    non-negative, and such a call stops a loop from vectorising.
     """
     if not isinstance(x, types.Float):
         return None
@@ -116,8 +122,9 @@ def sqrt(typingctx, x):
 
 @intrinsic
 def fma(typingctx, a, b, c):
-    """a * b + c rounded once (the ``llvm.fma`` intrinsic: one instruction on CPUs with FMA, e.g. any
-    x86-64 with AVX2; elsewhere LLVM calls libm's exact ``fma``). The trig reduction below relies on it."""
+    """a * b + c rounded once (the ``llvm.fma`` intrinsic: one instruction on CPUs with FMA, e.g.
+    any x86-64 with AVX2; elsewhere LLVM calls libm's exact ``fma``). The trig reduction below
+    relies on it."""
     if not all(isinstance(t, types.Float) for t in (a, b, c)):
         return None
     sig = types.float64(types.float64, types.float64, types.float64)

@@ -1,4 +1,5 @@
-"""The vessel kinds the simulator knows: kind name -> its module (one line per kind; see ``study.sim``)."""
+"""The vessel kinds the simulator knows: kind name -> its module (one line per kind; see
+``study.sim``)."""
 from __future__ import annotations
 
 import importlib

@@ -1,19 +1,21 @@
 """Nomoto (KT) parameters of any vessel: linearisation and steady turns of the kind's own equations.
 
 Sources:
-  Nomoto, K., Taguchi, T., Honda, K., Hirano, S. (1957). On the steering qualities of ships. International
-  Shipbuilding Progress 4(35), 354-370: the second-order response r/delta = K (1 + T3 s) / ((1 + T1 s)
-  (1 + T2 s)) of the linear sway-yaw equations, and its first-order equivalent T = T1 + T2 - T3.
-  Fossen, T.I. (2011). Handbook of Marine Craft Hydrodynamics and Motion Control, Wiley, Sec. 7.2 (the
-  transfer function of the linear sway-yaw model; T1 < 0 for a course-unstable ship).
-  Zheng, W., Xiao, C. (2017). Ship Science and Technology 39(9), 129-132 (``/work/shared/seeds/004_*.txt``):
-  the nonlinear forms T r' + r + alpha r^3 = K delta (eq. 18) and its second order (eq. 19), and the
-  step-wise procedure of their ref. [3] (K from small-rudder turns, then alpha from steady turns with K
-  fixed), which ``nomoto_alpha`` follows with the steady turns of the model itself.
+  Nomoto, K., Taguchi, T., Honda, K., Hirano, S. (1957). On the steering qualities of ships.
+  International Shipbuilding Progress 4(35), 354-370: the second-order response r/delta = K (1 + T3
+  s) / ((1 + T1 s) (1 + T2 s)) of the linear sway-yaw equations, and its first-order equivalent T =
+  T1 + T2 - T3. Fossen, T.I. (2011). Handbook of Marine Craft Hydrodynamics and Motion Control,
+  Wiley, Sec. 7.2 (the transfer function of the linear sway-yaw model; T1 < 0 for a course-unstable
+  ship). Zheng, W., Xiao, C. (2017). Ship Science and Technology 39(9), 129-132
+  (``/work/shared/seeds/004_*.txt``): the nonlinear forms T r' + r + alpha r^3 = K delta (eq. 18)
+  and its second order (eq. 19), and the step-wise procedure of their ref. [3] (K from small-rudder
+  turns, then alpha from steady turns with K fixed), which ``nomoto_alpha`` follows with the steady
+  turns of the model itself.
 
-Everything here evaluates the kind's compiled equations (``study.sim.accelerations``); nothing is re-derived,
-so any kind (mmg, abkowitz, waterjet, auv, nomoto) and any effect that changes the vessel's parameters (shallow
-water) is covered. Calm water: current, wind and yaw bias are not part of the linearisation or the turns.
+Everything here evaluates the kind's compiled equations (``study.sim.accelerations``); nothing is
+re-derived, so any kind (mmg, abkowitz, waterjet, auv, nomoto) and any effect that changes the
+vessel's parameters (shallow water) is covered. Calm water: current, wind and yaw bias are not part
+of the linearisation or the turns.
 """
 from __future__ import annotations
 
@@ -40,9 +42,9 @@ def _acc(vessel: Vessel, u, v, r, delta, n=None) -> np.ndarray:
 def linear_sway_yaw(vessel: Vessel, eps: float = _EPS) -> tuple[np.ndarray, np.ndarray]:
     """The linear sway-yaw system d[v, r]/dt = A [v, r] + b delta at straight running.
 
-    Operating point u = U0, v = r = 0, delta = 0, n = vessel.n0; A (2x2) and b (2,) by central differences of
-    the kind's own compiled equations (step ``eps``). For the ``nomoto`` kind the first state is its auxiliary
-    state z (see ``study.sim.nomoto``), which gives the same r/delta.
+    Operating point u = U0, v = r = 0, delta = 0, n = vessel.n0; A (2x2) and b (2,) by central
+    differences of the kind's own compiled equations (step ``eps``). For the ``nomoto`` kind the
+    first state is its auxiliary state z (see ``study.sim.nomoto``), which gives the same r/delta.
     """
     d = np.eye(3) * eps
     # one call: rows (+v, -v, +r, -r, +delta, -delta)
@@ -55,15 +57,16 @@ def linear_sway_yaw(vessel: Vessel, eps: float = _EPS) -> tuple[np.ndarray, np.n
 def nomoto(A: np.ndarray, b: np.ndarray) -> dict:
     """Second-order Nomoto parameters of a linear sway-yaw system d[v, r]/dt = A [v, r] + b delta.
 
-    r/delta = (n1 s + n0) / (s^2 + a1 s + a0) = K (1 + T3 s) / ((1 + T1 s)(1 + T2 s)), so K = n0 / a0,
-    T3 = n1 / n0, T1 + T2 = a1 / a0, T1 T2 = 1 / a0, and the first-order equivalent T = T1 + T2 - T3
-    = a1 / a0 - n1 / n0 (Nomoto 1957), real even when the poles are a complex pair.
+    r/delta = (n1 s + n0) / (s^2 + a1 s + a0) = K (1 + T3 s) / ((1 + T1 s)(1 + T2 s)), so K = n0 /
+    a0, T3 = n1 / n0, T1 + T2 = a1 / a0, T1 T2 = 1 / a0, and the first-order equivalent T = T1 + T2
+    - T3 = a1 / a0 - n1 / n0 (Nomoto 1957), real even when the poles are a complex pair.
 
-    Returns dict(K, T1, T2, T3, T, complex_poles). T1, T2 are ordered by magnitude, |T1| >= |T2| (the same as
-    T1 >= T2 for a course-stable ship; for a course-unstable one the slow, unstable pole gives T1 < 0 and
-    usually K < 0 too: signs are kept, they are meaningful). Complex poles: T1 = T2 = NaN and
-    ``complex_poles=True``. A pole cancelled by the zero (a mode that r does not see, such as the constant
-    auxiliary state of a first-order Nomoto model) is removed: T2 = T3 = 0 then.
+    Returns dict(K, T1, T2, T3, T, complex_poles). T1, T2 are ordered by magnitude, |T1| >= |T2|
+    (the same as T1 >= T2 for a course-stable ship; for a course-unstable one the slow, unstable
+    pole gives T1 < 0 and usually K < 0 too: signs are kept, they are meaningful). Complex poles: T1
+    = T2 = NaN and ``complex_poles=True``. A pole cancelled by the zero (a mode that r does not see,
+    such as the constant auxiliary state of a first-order Nomoto model) is removed: T2 = T3 = 0
+    then.
     """
     A = np.asarray(A, float)
     b = np.asarray(b, float)
@@ -95,11 +98,13 @@ def nomoto(A: np.ndarray, b: np.ndarray) -> dict:
 
 
 def nomoto_linear(vessel: Vessel) -> dict:
-    """Linear Nomoto parameters of a vessel at straight running: dict(K, T1, T2, T3, T, complex_poles).
+    """Linear Nomoto parameters of a vessel at straight running: dict(K, T1, T2, T3, T,
+    complex_poles).
 
-    K [1/s], T's [s]; r/delta = K (1 + T3 s) / ((1 + T1 s)(1 + T2 s)), T = T1 + T2 - T3 (see :func:`nomoto`).
-    From :func:`linear_sway_yaw` (central differences of the kind's compiled equations at u = U0,
-    v = r = delta = 0, n = n0). For the ``nomoto`` kind this returns its own K, T1, T2, T3 (to rounding).
+    K [1/s], T's [s]; r/delta = K (1 + T3 s) / ((1 + T1 s)(1 + T2 s)), T = T1 + T2 - T3 (see
+    :func:`nomoto`). From :func:`linear_sway_yaw` (central differences of the kind's compiled
+    equations at u = U0, v = r = delta = 0, n = n0). For the ``nomoto`` kind this returns its own K,
+    T1, T2, T3 (to rounding).
     """
     return nomoto(*linear_sway_yaw(vessel))
 
@@ -113,7 +118,8 @@ def _scales(vessel: Vessel):
 
 
 def _residual_and_jacobian(vessel: Vessel, x: np.ndarray, delta: float, h: float = 1e-6):
-    """Scaled (du, dv, dr) at the scaled state x and its central-difference Jacobian, in one call."""
+    """Scaled (du, dv, dr) at the scaled state x and its central-difference Jacobian, in one
+    call."""
     xs, fs = _scales(vessel)
     pts = np.repeat(x[None, :], 7, axis=0)
     for j in range(3):
@@ -128,12 +134,12 @@ def _residual_and_jacobian(vessel: Vessel, x: np.ndarray, delta: float, h: float
 def steady_turn(vessel: Vessel, delta: float, start=None, tol: float = 1e-10):
     """The nonlinear steady turn du = dv = dr = 0 at rudder angle ``delta`` [rad] and n = n0.
 
-    Solved for (u, v, r) with ``scipy.optimize.root`` (Powell's hybrid method, the Jacobian by central
-    differences of the kind's compiled equations, everything scaled by U0 and L) from ``start`` (SI
-    [u, v, r]; default straight running at U0). States that nothing depends on and equations that depend on
-    nothing (the Nomoto kind's constant surge speed; the constant auxiliary state of its first order) are
-    held at their start value. Returns (SI state (3,), converged: bool). Converged means max |scaled
-    residual| <= tol and u > 0.05 U0.
+    Solved for (u, v, r) with ``scipy.optimize.root`` (Powell's hybrid method, the Jacobian by
+    central differences of the kind's compiled equations, everything scaled by U0 and L) from
+    ``start`` (SI [u, v, r]; default straight running at U0). States that nothing depends on and
+    equations that depend on nothing (the Nomoto kind's constant surge speed; the constant auxiliary
+    state of its first order) are held at their start value. Returns (SI state (3,), converged:
+    bool). Converged means max |scaled residual| <= tol and u > 0.05 U0.
     """
     from scipy.optimize import root
 
@@ -161,8 +167,8 @@ def steady_turn(vessel: Vessel, delta: float, start=None, tol: float = 1e-10):
 
 
 def _simulated_turn(vessel: Vessel, delta: float) -> np.ndarray:
-    """(u, v_w, r) at the end of a 40 L/U0 run with the rudder held at ``delta`` (calm water): a start for
-    :func:`steady_turn` on the branch a ship actually reaches (the stable one)."""
+    """(u, v_w, r) at the end of a 40 L/U0 run with the rudder held at ``delta`` (calm water): a
+    start for :func:`steady_turn` on the branch a ship actually reaches (the stable one)."""
     from . import simulate
 
     calm = vessel.with_params(current_speed=0.0, wind_speed=0.0, ext_X=0.0, ext_Y=0.0, ext_N=0.0)
@@ -184,32 +190,36 @@ def _cubic_r(K: float, alpha: float, rhs: float, near: float) -> float:
 
 
 def nomoto_alpha(vessel: Vessel, K: float, delta_max_deg: float = 20.0, n_points: int = 8) -> dict:
-    """Cubic coefficient alpha [s^2] of the nonlinear Nomoto model, from the vessel's own steady turns.
+    """Cubic coefficient alpha [s^2] of the nonlinear Nomoto model, from the vessel's own steady
+    turns.
 
-    A DERIVED, APPROXIMATE truth: the vessel's steady turns (du = dv = dr = 0 at fixed rudder and n = n0) at
-    rudder angles delta_max_deg k / n_points, k = 1 .. n_points, on both sides, are fitted by least squares
+    A DERIVED, APPROXIMATE truth: the vessel's steady turns (du = dv = dr = 0 at fixed rudder and n
+    = n0) at rudder angles delta_max_deg k / n_points, k = 1 .. n_points, on both sides, are fitted
+    by least squares
     with
 
         K (delta + delta_0) = r + alpha r^3          (K fixed, alpha and delta_0 fitted)
 
-    the steady state of T r' + r + alpha r^3 = K delta (Zheng & Xiao 2017, eq. 18), following the step-wise
-    procedure of their ref. [3] (K first, then alpha from steady turns with K fixed). Everything a Nomoto
-    model leaves out is inside this alpha: the speed loss in the turn (the vessel's u drops; the Nomoto
-    model keeps U0 and a constant K), the drift angle, and any higher-order terms of r(delta); it depends on
-    the fitting range. delta_0 [rad] is a rudder offset that absorbs a built-in asymmetry (the Mariner's
-    propeller Y'0, N'0) so that it does not bias alpha; it is about 0 for a symmetric vessel. (The
-    alternative, averaging r of the two sides, was not used: it needs every turn on both sides to converge.)
+    the steady state of T r' + r + alpha r^3 = K delta (Zheng & Xiao 2017, eq. 18), following the
+    step-wise procedure of their ref. [3] (K first, then alpha from steady turns with K fixed).
+    Everything a Nomoto model leaves out is inside this alpha: the speed loss in the turn (the
+    vessel's u drops; the Nomoto model keeps U0 and a constant K), the drift angle, and any
+    higher-order terms of r(delta); it depends on the fitting range. delta_0 [rad] is a rudder
+    offset that absorbs a built-in asymmetry (the Mariner's propeller Y'0, N'0) so that it does not
+    bias alpha; it is about 0 for a symmetric vessel. (The alternative, averaging r of the two
+    sides, was not used: it needs every turn on both sides to converge.)
 
-    The turns: on each side the largest angle is found from the end of a time simulation with the rudder
-    held (the branch a ship reaches, which matters for a course-unstable vessel whose r(delta) is S-shaped),
-    polished by :func:`steady_turn` (``scipy.optimize.root`` on the kind's compiled equations); each smaller
-    angle continues from the previous angle's solution (inwards: a course-unstable vessel stays on the
-    branch that turns with the rudder), falling back to a simulation if that fails. Turns that still do not
-    converge are skipped with a warning; fewer than 3 converged turns raise ValueError.
+    The turns: on each side the largest angle is found from the end of a time simulation with the
+    rudder held (the branch a ship reaches, which matters for a course-unstable vessel whose
+    r(delta) is S-shaped), polished by :func:`steady_turn` (``scipy.optimize.root`` on the kind's
+    compiled equations); each smaller angle continues from the previous angle's solution (inwards: a
+    course-unstable vessel stays on the branch that turns with the rudder), falling back to a
+    simulation if that fails. Turns that still do not converge are skipped with a warning; fewer
+    than 3 converged turns raise ValueError.
 
-    Returns dict(alpha, delta_offset [rad], rms_residual [rad/s]: RMS of K (delta + delta_0) - r - alpha r^3,
-    r_rms_error [rad/s]: RMS of the fitted model's steady r minus the vessel's, deltas [rad], r_steady
-    [rad/s], u_steady [m/s] of the converged turns (sorted by delta), K, n_skipped).
+    Returns dict(alpha, delta_offset [rad], rms_residual [rad/s]: RMS of K (delta + delta_0) - r -
+    alpha r^3, r_rms_error [rad/s]: RMS of the fitted model's steady r minus the vessel's, deltas
+    [rad], r_steady [rad/s], u_steady [m/s] of the converged turns (sorted by delta), K, n_skipped).
     """
     if not (math.isfinite(delta_max_deg) and delta_max_deg > 0.0):
         raise ValueError(f"nomoto_alpha: delta_max_deg = {delta_max_deg}; expected a positive angle in degrees")
@@ -262,11 +272,11 @@ def nomoto_truth(vessel: Vessel, order: int, nonlinear: bool, delta_max_deg: flo
                  n_points: int = 8) -> dict:
     """The parameters a Nomoto identification model's truth would be, and how they were obtained.
 
-    order 1: K, T (T = T1 + T2 - T3); order 2: K, T1, T2, T3; plus alpha if ``nonlinear``. The string
-    ``how`` says whether the values are exact (the vessel is a ``nomoto`` kind) or derived (any other kind:
-    :func:`nomoto_linear` at U0 and :func:`nomoto_alpha` from steady turns, approximations of the vessel by a
-    Nomoto model). A second-order truth of a vessel with complex poles has T1 = T2 = NaN (no real pair
-    exists; ``how`` says so).
+    order 1: K, T (T = T1 + T2 - T3); order 2: K, T1, T2, T3; plus alpha if ``nonlinear``. The
+    string ``how`` says whether the values are exact (the vessel is a ``nomoto`` kind) or derived
+    (any other kind: :func:`nomoto_linear` at U0 and :func:`nomoto_alpha` from steady turns,
+    approximations of the vessel by a Nomoto model). A second-order truth of a vessel with complex
+    poles has T1 = T2 = NaN (no real pair exists; ``how`` says so).
     """
     if order not in (1, 2):
         raise ValueError(f"nomoto_truth: order = {order!r}; expected 1 or 2")

@@ -1,9 +1,11 @@
-"""Manoeuvres: zigzags (either side first, multi-stage sequences), turning circles with pull-out, random rudder.
+"""Manoeuvres: zigzags (either side first, multi-stage sequences), turning circles with pull-out,
+random rudder.
 
-A manoeuvre config (``conf/maneuver/<name>.yaml``) becomes a :class:`Maneuver`, which encodes itself for the
-compiled integrator as a controller programme (closed loop on the simulated heading: zigzag switches and the
-pull-out depend on the ship's own response) plus an open-loop command series. Definitions follow IMO
-MSC.137(76) and its explanatory notes MSC/Circ.1053, and ITTC Recommended Procedure 7.5-04-02-01.
+A manoeuvre config (``conf/maneuver/<name>.yaml``) becomes a :class:`Maneuver`, which encodes itself
+for the compiled integrator as a controller programme (closed loop on the simulated heading: zigzag
+switches and the pull-out depend on the ship's own response) plus an open-loop command series.
+Definitions follow IMO MSC.137(76) and its explanatory notes MSC/Circ.1053, and ITTC Recommended
+Procedure 7.5-04-02-01.
 """
 from __future__ import annotations
 

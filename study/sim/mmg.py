@@ -1,7 +1,8 @@
 """MMG standard method: hull, propeller and rudder forces (Yasukawa & Yoshimura 2015).
 
-Yasukawa, H., Yoshimura, Y. (2015). Introduction of MMG standard method for ship maneuvering predictions.
-J Mar Sci Technol 20, 37-52. doi:10.1007/s00773-014-0293-y. Equation numbers below refer to that paper.
+Yasukawa, H., Yoshimura, Y. (2015). Introduction of MMG standard method for ship maneuvering
+predictions. J Mar Sci Technol 20, 37-52. doi:10.1007/s00773-014-0293-y. Equation numbers below
+refer to that paper.
 
 Non-dimensionalisation (their Sec. 2): X' = X / (0.5 rho L d U^2), N' = N / (0.5 rho L^2 d U^2),
 v' = v_m / U, r' = r L / U; masses by 0.5 rho L^2 d, moments of inertia by 0.5 rho L^4 d.
@@ -84,9 +85,10 @@ def _thrust(u, beta, rp, n, P, b):
 def accel(u, v, r, delta, n, Xe, Ye, Ne, P, b):
     """MMG equations of motion (eq. 4) solved for (du, dv, dr); v is the sway velocity at midship.
 
-    Written for a short dependency chain (a single simulation is latency-bound): the rudder normal force
-    enters X, Y and N linearly, so its coefficients are folded into the solved accelerations before F_N is
-    known, and U_R^2 is formed from u_R^2 so that the two square roots of the rudder inflow run side by side.
+    Written for a short dependency chain (a single simulation is latency-bound): the rudder normal
+    force enters X, Y and N linearly, so its coefficients are folded into the solved accelerations
+    before F_N is known, and U_R^2 is formed from u_R^2 so that the two square roots of the rudder
+    inflow run side by side.
     """
     rho = P[0, b]; L = P[1, b]; d = P[2, b]
     m = P[3, b]; xG = P[4, b]; IzG = P[5, b]; mx = P[6, b]; my = P[7, b]; Jz = P[8, b]
@@ -148,7 +150,8 @@ def accel(u, v, r, delta, n, Xe, Ye, Ne, P, b):
 
 
 def pack(vessel: dict) -> np.ndarray:
-    """Turn a resolved vessel config (dict) into the parameter vector in ``PARAM_NAMES`` order (SI)."""
+    """Turn a resolved vessel config (dict) into the parameter vector in ``PARAM_NAMES`` order
+    (SI)."""
     p = vessel["particulars"]
     rho, L, m, IzG = mass_and_inertia(vessel)
     d = float(p["d"])
@@ -182,7 +185,8 @@ def _accel_kernel():
 
 
 def straight_surge_force(params: np.ndarray, u: float, n: float) -> float:
-    """Net surge force on a straight course (v = r = delta = 0); zero at the self-propulsion point."""
+    """Net surge force on a straight course (v = r = delta = 0); zero at the self-propulsion
+    point."""
     P = np.ascontiguousarray(params, dtype=np.float64).reshape(-1, 1)
     zero = np.zeros(1)
     out = np.empty((1, 1, 3))

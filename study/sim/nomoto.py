@@ -1,12 +1,12 @@
 """Nonlinear Nomoto (KT) yaw-response models of the first and second order.
 
 Sources:
-  Nomoto, K., Taguchi, T., Honda, K., Hirano, S. (1957). On the steering qualities of ships. International
-  Shipbuilding Progress 4(35), 354-370 (the linear first- and second-order response models).
-  Zheng, W., Xiao, C. (2017). The parameter identification of KT equations on ship maneuverability. Ship
-  Science and Technology 39(9), 129-132 (``/work/shared/seeds/004_*.txt``): the nonlinear forms, their
-  eqs. 12, 13, 18 and 19, with T = T1 + T2 - T3 (below eq. 13).
-  Fossen, T.I. (2011). Handbook of Marine Craft Hydrodynamics and Motion Control, Wiley, Sec. 7.2 (Nomoto
+  Nomoto, K., Taguchi, T., Honda, K., Hirano, S. (1957). On the steering qualities of ships.
+  International Shipbuilding Progress 4(35), 354-370 (the linear first- and second-order response
+  models). Zheng, W., Xiao, C. (2017). The parameter identification of KT equations on ship
+  maneuverability. Ship Science and Technology 39(9), 129-132 (``/work/shared/seeds/004_*.txt``):
+  the nonlinear forms, their eqs. 12, 13, 18 and 19, with T = T1 + T2 - T3 (below eq. 13). Fossen,
+  T.I. (2011). Handbook of Marine Craft Hydrodynamics and Motion Control, Wiley, Sec. 7.2 (Nomoto
   models, T1 < 0 for a course-unstable ship).
 
 Equations (r yaw rate [rad/s], delta rudder angle [rad], delta > 0 turns to starboard)::
@@ -14,28 +14,30 @@ Equations (r yaw rate [rad/s], delta rudder angle [rad], delta > 0 turns to star
     first order  (eq. 18):  T r' + r + alpha r^3 = K delta
     second order (eq. 19):  T1 T2 r'' + (T1 + T2) r' + r + alpha r^3 = K delta + K T3 delta'
 
-Parameters are dimensional: K [1/s], T1, T2, T3 [s], alpha [s^2]. The first order is T2 = T3 = 0 (T1 = T).
+Parameters are dimensional: K [1/s], T1, T2, T3 [s], alpha [s^2]. The first order is T2 = T3 = 0 (T1
+= T).
 
-State realisation. The second order needs a second state and, as printed, the rudder rate delta'. It is
-realised without delta' (the integrator's rudder is only piecewise linear) by
+State realisation. The second order needs a second state and, as printed, the rudder rate delta'. It
+is realised without delta' (the integrator's rudder is only piecewise linear) by
 
     z = T1 T2 r' - K T3 delta:   z' = K delta - r - alpha r^3 - (T1 + T2) r',   r' = (z + K T3 delta) / (T1 T2)
 
-(substitute: T1 T2 r'' = z' + K T3 delta', which is eq. 19). z [rad] is carried in the integrator's ``v_w``
-slot: this kind declares ``KINEMATIC_SWAY = False``, so the kinematics use no sway velocity (the track
-follows the heading: a ship without drift) and the output ``v`` is the current's contribution only. z at
-rest (r' = 0) is -K T3 delta (``aux_state_at_rest``); z = 0 for the first order (and is then constant).
+(substitute: T1 T2 r'' = z' + K T3 delta', which is eq. 19). z [rad] is carried in the integrator's
+``v_w`` slot: this kind declares ``KINEMATIC_SWAY = False``, so the kinematics use no sway velocity
+(the track follows the heading: a ship without drift) and the output ``v`` is the current's
+contribution only. z at rest (r' = 0) is -K T3 delta (``aux_state_at_rest``); z = 0 for the first
+order (and is then constant).
 
 What the model leaves out (by construction, not approximations of this module):
-  - the surge speed is constant (du = 0): the ship keeps the speed it starts with (``operation.U0``); no
-    speed loss in turns. The speed enters only the track (x0, y0);
-  - the external forces of the integrator (Xe, Ye, Ne: yaw bias, wind) are ignored; a current drifts the
-    track (kinematics) but does not act on the yaw response;
+  - the surge speed is constant (du = 0): the ship keeps the speed it starts with
+    (``operation.U0``); no speed loss in turns. The speed enters only the track (x0, y0);
+  - the external forces of the integrator (Xe, Ye, Ne: yaw bias, wind) are ignored; a current drifts
+    the track (kinematics) but does not act on the yaw response;
   - ``n`` (propeller speed) is unused; ``operation.n`` may be 0;
   - the shallow-water effect cannot act on it (``LINEAR_DERIVATIVES`` is empty: there are no hull
     derivatives; ``ShallowWater`` raises a ValueError for this kind, deep water is a no-op).
-The rudder actuator (rate limit, lag, dead time, delta_max) comes from the config's ``actuator`` block as for
-every kind (``study.sim.effects.default_env``).
+The rudder actuator (rate limit, lag, dead time, delta_max) comes from the config's ``actuator``
+block as for every kind (``study.sim.effects.default_env``).
 """
 from __future__ import annotations
 
@@ -69,11 +71,12 @@ I_L, I_U0, I_K, I_T1, I_T2, I_T3, I_ALPHA = range(len(PARAM_NAMES))
 
 @njit(cache=False, inline="always", error_model="numpy")  # not cached: would go stale when fastmath changes
 def accel(u, v, r, delta, n, Xe, Ye, Ne, P, b):
-    """(du, dz, dr) of the nonlinear Nomoto model; ``v`` is the auxiliary state z; u, n, Xe, Ye, Ne unused.
+    """(du, dz, dr) of the nonlinear Nomoto model; ``v`` is the auxiliary state z; u, n, Xe, Ye, Ne
+    unused.
 
-    Branch-free: the first order (T2 == 0, per member) and the second order are both computed and one is
-    selected, so a batch may mix them and the member loop still vectorises. The unused side may be inf/nan
-    (1 / (T1 T2) at T2 = 0) and is discarded by the select.
+    Branch-free: the first order (T2 == 0, per member) and the second order are both computed and
+    one is selected, so a batch may mix them and the member loop still vectorises. The unused side
+    may be inf/nan (1 / (T1 T2) at T2 = 0) and is discarded by the select.
     """
     K = P[I_K, b]
     T1 = P[I_T1, b]
@@ -92,7 +95,8 @@ def aux_state_at_rest(P: np.ndarray, delta) -> np.ndarray:
     """The ``v_w`` slot (z) at r' = 0 with the rudder at ``delta``: z = -K T3 delta.
 
     P : kind parameters, shape (n_kind_params,) or (n_kind_params, B) (a full packed vector also works: the
-    kind's parameters come first). Used by ``study.sim.replay`` and ``simulate`` for the initial state.
+    kind's parameters come first). Used by ``study.sim.replay`` and ``simulate`` for the initial
+    state.
     """
     P = np.asarray(P, float)
     return -P[I_K] * P[I_T3] * np.asarray(delta, float)
@@ -115,8 +119,9 @@ def pack(vessel: dict) -> np.ndarray:
     """Resolved vessel config -> parameter vector in ``PARAM_NAMES`` order (SI).
 
     Reads ``nomoto: {K, T1, T2, T3, alpha}`` (T2, T3, alpha default to 0: first order, linear),
-    ``particulars.Lpp`` and ``operation.U0``. Checks: T1 != 0; T1 T2 != 0 unless T2 == 0, and then T3 == 0 (a
-    first-order model with T3 would need the rudder rate, which the integrator does not carry).
+    ``particulars.Lpp`` and ``operation.U0``. Checks: T1 != 0; T1 T2 != 0 unless T2 == 0, and then
+    T3 == 0 (a first-order model with T3 would need the rudder rate, which the integrator does not
+    carry).
     """
     name = vessel.get("name", "?")
     sec = vessel.get(COEFF_SECTION)

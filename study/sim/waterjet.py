@@ -1,8 +1,9 @@
 """Waterjet-propelled USV, 3-DOF separated (MMG-type) model of Song et al. (2025).
 
-Song, L., Wang, Y., Peng, W., Li, P., Liu, Y., Zhang, Y. (2025). Hydrodynamic coefficients identification of
-ship simplified modular model based on support vector regression. Chinese Journal of Ship Research 20(1),
-65-75, doi:10.19693/j.issn.1673-3185.03832 (``/work/shared/seeds/000_*.txt``). Equation numbers below are the
+Song, L., Wang, Y., Peng, W., Li, P., Liu, Y., Zhang, Y. (2025). Hydrodynamic coefficients
+identification of ship simplified modular model based on support vector regression. Chinese Journal
+of Ship Research 20(1), 65-75, doi:10.19693/j.issn.1673-3185.03832
+(``/work/shared/seeds/000_*.txt``). Equation numbers below are the
 seed's.
 
 Equations of motion (eq. 1; origin at the centre of gravity, so there is no x_G coupling)::
@@ -14,17 +15,19 @@ Equations of motion (eq. 1; origin at the centre of gravity, so there is no x_G 
 The seed prints ``-(m + m_x) r v`` in the sway equation; its identification equation (eq. 14) uses
 ``u(k) r(k)``, which is the physically right centripetal term, and that is what is used here.
 
-Hull forces (eq. 2), non-dimensionalised as in the seed's regression (eq. 14): forces by 0.5 rho L d, the yaw
-moment by 0.5 rho L^2 d, times the dimensional velocity products of the seed's regressors::
+Hull forces (eq. 2), non-dimensionalised as in the seed's regression (eq. 14): forces by 0.5 rho L
+d, the yaw moment by 0.5 rho L^2 d, times the dimensional velocity products of the seed's
+regressors::
 
     X_H = 0.5 rho L d   (X'uu u^2 + X'vv v^2 + X'rr r^2 L^2)
     Y_H = 0.5 rho L d   (Y'v v U + Y'r r U L + Y'vv v|v| + Y'vr |v| r L + Y'rr r|r| L^2)
     N_H = 0.5 rho L^2 d (N'v v U + N'r r U L + N'rr r|r| L^2 + N'vrr v r^2 L^2 / U + N'vvr v^2 r L / U)
 
-with U = sqrt(u^2 + v^2). These are the MMG forms X' U^2 with v' = v/U, r' = r L/U (e.g. Y'vr |v'| r' U^2 =
-Y'vr |v| r L). Eq. 14 as printed divides the yaw equation's inertia term (I'zz + J'zz) L^3 dr/dt by
-0.5 rho L d but the jet moment by 0.5 rho L^2 d; the second (standard MMG) is used. The full model's N'vrr,
-N'vvr have no published regressor; the MMG forms above are used (the simplified model, eq. 13, drops them).
+with U = sqrt(u^2 + v^2). These are the MMG forms X' U^2 with v' = v/U, r' = r L/U (e.g. Y'vr |v'|
+r' U^2 = Y'vr |v| r L). Eq. 14 as printed divides the yaw equation's inertia term (I'zz + J'zz) L^3
+dr/dt by 0.5 rho L d but the jet moment by 0.5 rho L^2 d; the second (standard MMG) is used. The
+full model's N'vrr, N'vvr have no published regressor; the MMG forms above are used (the simplified
+model, eq. 13, drops them).
 
 Waterjet (eq. 3)::
 
@@ -32,17 +35,19 @@ Waterjet (eq. 3)::
     Y_P = rho A_j v_j (v_j - alpha v) sin(delta_s)
     N_P = Y_P x_T
 
-SIGN CONVERSION: with the nozzle aft of the centre of gravity (x_T < 0) the seed's eq. 3 gives N_P < 0, a turn
-to port, for a positive nozzle angle delta_s. This package's delta > 0 turns to starboard, so delta_s = -delta:
-Y_P = -rho A_j v_j (v_j - alpha v) sin(delta), N_P = Y_P x_T > 0 for delta > 0.
+SIGN CONVERSION: with the nozzle aft of the centre of gravity (x_T < 0) the seed's eq. 3 gives N_P <
+0, a turn to port, for a positive nozzle angle delta_s. This package's delta > 0 turns to starboard,
+so delta_s = -delta: Y_P = -rho A_j v_j (v_j - alpha v) sin(delta), N_P = Y_P x_T > 0 for delta > 0.
 
-Steering with the published hull: the seed's N'v is positive, which puts the hull's sway neutral point at
-x = (N'v / Y'v) L = -0.617 L from G. A jet forward of it gives a steady turn opposite to its own moment, so the
-config's x_T is an effective lever arm beyond that point (see conf/vessel/usv_waterjet.yaml).
+Steering with the published hull: the seed's N'v is positive, which puts the hull's sway neutral
+point at x = (N'v / Y'v) L = -0.617 L from G. A jet forward of it gives a steady turn opposite to
+its own moment, so the config's x_T is an effective lever arm beyond that point (see
+conf/vessel/usv_waterjet.yaml).
 
-Actuators: the integrator's propeller input ``n`` is used as the jet velocity v_j in m/s (not rev/s); the
-nozzle angle is the integrator's rudder ``delta`` (with the steering gear of the config's ``actuator`` block).
-``solve_n`` gives the v_j of a steady straight run at U0 in closed form.
+Actuators: the integrator's propeller input ``n`` is used as the jet velocity v_j in m/s (not
+rev/s); the nozzle angle is the integrator's rudder ``delta`` (with the steering gear of the
+config's ``actuator`` block). ``solve_n`` gives the v_j of a steady straight run at U0 in closed
+form.
 """
 from __future__ import annotations
 
@@ -84,7 +89,8 @@ I_AJ, I_ALPHA, I_XT = (IDX[k] for k in ("Aj", "alpha", "xT"))
 
 @njit(cache=False, inline="always", error_model="numpy")  # not cached: would go stale when fastmath changes
 def accel(u, v, r, delta, n, Xe, Ye, Ne, P, b):
-    """Song et al. (2025) eqs. (1)-(3) solved for (du, dv, dr); ``n`` is the jet velocity v_j [m/s]."""
+    """Song et al. (2025) eqs. (1)-(3) solved for (du, dv, dr); ``n`` is the jet velocity v_j
+    [m/s]."""
     rho = P[I_RHO, b]; L = P[I_L, b]; d = P[I_D, b]
     U = fm.sqrt(u * u + v * v)
     moving = U > 1e-6

@@ -1,7 +1,8 @@
 """The results store: run records, their checks and names, the results folder, the parquet tables.
 
-It knows nothing of pipelines: ``study.run.executor`` decides what to compute and hands finished records to
-:class:`ResultStore`. Full description of the folder and its columns: ``results/README.md``.
+It knows nothing of pipelines: ``study.run.executor`` decides what to compute and hands finished
+records to :class:`ResultStore`. Full description of the folder and its columns:
+``results/README.md``.
 """
 from .files import dumps
 from .provenance import PROVENANCE_PACKAGES, provenance

@@ -1,5 +1,6 @@
-"""Files of the results folder written so that a reader never sees half of one: atomic writes, temp names
-that say who wrote them (so a crash's leftover can be told from a live writer's file), archive names."""
+"""Files of the results folder written so that a reader never sees half of one: atomic writes,
+temp names that say who wrote them (so a crash's leftover can be told from a live writer's file),
+archive names."""
 from __future__ import annotations
 
 import json
@@ -26,7 +27,8 @@ def stamp() -> str:
 
 
 def _json_default(obj: Any) -> Any:
-    """Make numpy scalars/arrays and paths JSON-serialisable (configs and metrics often carry them)."""
+    """Make numpy scalars/arrays and paths JSON-serialisable (configs and metrics often carry
+    them)."""
     if isinstance(obj, np.generic):
         return obj.item()
     if isinstance(obj, np.ndarray):
@@ -49,7 +51,8 @@ def tmp_path(folder: Path, name: str) -> Path:
 
 
 def tmp_owner(name: str) -> tuple[str, int] | None:
-    """``(host, pid)`` of a temp name made by :func:`tmp_path`; None for another name (an older format)."""
+    """``(host, pid)`` of a temp name made by :func:`tmp_path`; None for another name (an older
+    format)."""
     if not (name.startswith(".") and name.endswith(".tmp")):
         return None
     parts = name[1:-4].rsplit("~", 3)
@@ -59,7 +62,8 @@ def tmp_owner(name: str) -> tuple[str, int] | None:
 
 
 def pid_alive(pid: int) -> bool:
-    """Whether a process of the local host is running (a zombie counts as running: it is not ours to judge)."""
+    """Whether a process of the local host is running (a zombie counts as running: it is not ours
+    to judge)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -72,9 +76,10 @@ def pid_alive(pid: int) -> bool:
 def atomic_write_bytes(path: Path, data: bytes) -> None:
     """Write ``data`` to ``path`` so that readers see either the old file or the complete new one.
 
-    The temp file lives in the same folder (``os.replace`` is only atomic within one file system), starts with a
-    dot and ends in ``.tmp`` so that no glob for ``*.json`` / ``*.parquet`` picks it up, and its name says which
-    host and process wrote it (:func:`tmp_path`). It is created with mode 0666 minus the umask (not mkstemp's
+    The temp file lives in the same folder (``os.replace`` is only atomic within one file system),
+    starts with a dot and ends in ``.tmp`` so that no glob for ``*.json`` / ``*.parquet`` picks it
+    up, and its name says which host and process wrote it (:func:`tmp_path`). It is created with
+    mode 0666 minus the umask (not mkstemp's
     0600) so a shared results folder stays readable.
     """
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -100,7 +105,8 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
 
 
 def unique(path: Path) -> Path:
-    """``path`` or, if taken, ``path`` with ``-1``, ``-2``... before the suffix (archives never overwrite)."""
+    """``path`` or, if taken, ``path`` with ``-1``, ``-2``... before the suffix (archives never
+    overwrite)."""
     if not path.exists():
         return path
     stem, suffix = (path.name[: -len(".json")], ".json") if path.name.endswith(".json") else (path.name, "")

@@ -1,43 +1,50 @@
-"""The code fingerprint of a run: a hash of the source of the components it used, so that resume can tell a
-result computed by today's code from one computed before, say, an estimator was fixed (benchopt keys its cache
-the same way, on the source files of the solver, dataset and objective of a result).
+"""The code fingerprint of a run: a hash of the source of the components it used, so that resume can
+tell a result computed by today's code from one computed before, say, an estimator was fixed
+(benchopt keys its cache the same way, on the source files of the solver, dataset and objective of a
+result).
 
 The components of a run, and the modules each starts from (:func:`entries`):
 
 =============  ======================================================================================================
 ``simulator``  ``study.sim`` (the compiled integrator and the effects), the vessel kind's module (``vessel.kind``),
-               ``study.records.measure``, ``study.sim.maneuvers``, and the YAML of every manoeuvre the run simulates
-               (``conf/maneuver/<name>.yaml``: read at run time by its name, so not part of the configuration)
+               ``study.records.measure``, ``study.sim.maneuvers``, and the YAML of every manoeuvre
+               the run simulates (``conf/maneuver/<name>.yaml``: read at run time by its name, so
+               not part of the configuration)
 ``model``      ``study.identify.models``, ``study.identify.regression``; with ``model.effects``: identification
-               with effects, ``study.identify.with_effects``, every module of ``study.identify.effects`` and
+               with effects, ``study.identify.with_effects``, every module of
+               ``study.identify.effects`` and
                ``conf/effect/<name>.yaml``
 ``structure``  ``study.identify.structures``
 ``estimator``  the module of ``estimator._target_`` and ``study.identify.estimators`` (the factory); a module
                outside the repository (a user's own class) is hashed under its module name
 ``pipeline``   ``study.run.pipeline`` (a simulated run); a run on files (``train`` given): also ``study.run.records_run``,
-               ``study.records.schema``, ``study.records.loaders``, ``study.records.vessel_checks``, ``study.records.maneuver_metrics`` and
-               identification with effects (its replay); a doctor ladder step (``study: doctor``):
-               ``study.commands.diagnose``, the doctor and identification with effects
+               ``study.records.schema``, ``study.records.loaders``, ``study.records.vessel_checks``,
+               ``study.records.maneuver_metrics`` and identification with effects (its replay); a
+               doctor ladder step (``study: doctor``): ``study.commands.diagnose``, the doctor and
+               identification with effects
 =============  ======================================================================================================
 
-A component is its entry modules **plus every module of the ``study`` package they import**, found statically
-(the import lines of its source, those inside functions too), transitively: ``study.identify.fit`` is in the
-``pipeline`` component because ``study.run.pipeline`` imports it. An import *into* one of the
-:data:`OPTIONAL_PACKAGES` from a module outside it is not followed: those packages run only when the
-configuration says so (``model.effects``, ``train``, ...), and they are then entries. So editing the SVR
-estimator changes the fingerprint of SVR runs only, editing ``study/sim/mmg.py`` that of runs on MMG vessels,
-and editing the figures or the results store changes none.
+A component is its entry modules **plus every module of the ``study`` package they import**, found
+statically (the import lines of its source, those inside functions too), transitively:
+``study.identify.fit`` is in the ``pipeline`` component because ``study.run.pipeline`` imports it.
+An import *into* one of the :data:`OPTIONAL_PACKAGES` from a module outside it is not followed:
+those packages run only when the configuration says so (``model.effects``, ``train``, ...), and they
+are then entries. So editing the SVR estimator changes the fingerprint of SVR runs only, editing
+``study/sim/mmg.py`` that of runs on MMG vessels, and editing the figures or the results store
+changes none.
 
-What is hashed is what Python executes (:data:`SCHEME` ``executed``): a module's source without its comments,
-docstrings (and any other statement that is a bare string), blank lines and trailing spaces
-(:func:`executed_source`), so that documenting a component leaves its results current while any change to a
-statement stales them. Other files (YAML) are hashed on their contents. Line endings are normalised to ``\\n``
-and mtimes never enter: the same checkout gives the same fingerprint on every machine, operating system and Python
-version (the positions come from :mod:`tokenize` and :mod:`ast`, the text from the file). Each file is read and
-hashed once per process. A record written before this rule (its ``code`` has no ``scheme``) was hashed on the
-files' bytes; it is compared with the bytes' fingerprint (``code['bytes']``), so it stays current until a file
-of its components changes at all. Not included: the versions of numpy, scipy, ... (they are in the record's
-``provenance``) and the configuration (it is in the run id); ``resume=config`` reuses results whatever code made
+What is hashed is what Python executes (:data:`SCHEME` ``executed``): a module's source without its
+comments, docstrings (and any other statement that is a bare string), blank lines and trailing
+spaces (:func:`executed_source`), so that documenting a component leaves its results current while
+any change to a statement stales them. Other files (YAML) are hashed on their contents. Line endings
+are normalised to ``\\n`` and mtimes never enter: the same checkout gives the same fingerprint on
+every machine, operating system and Python version (the positions come from :mod:`tokenize` and
+:mod:`ast`, the text from the file). Each file is read and hashed once per process. A record written
+before this rule (its ``code`` has no ``scheme``) was hashed on the files' bytes; it is compared
+with the bytes' fingerprint (``code['bytes']``), so it stays current until a file of its components
+changes at all. Not included: the versions of numpy, scipy, ... (they are in the record's
+``provenance``) and the configuration (it is in the run id); ``resume=config`` reuses results
+whatever code made
 them.
 """
 from __future__ import annotations
@@ -77,7 +84,8 @@ _FILE_RUN_MODULES = ("study.run.records_run", "study.records.schema", "study.rec
 # ------------------------------------------------------------------------------------------------ modules
 @lru_cache(maxsize=None)
 def _module_file(module: str) -> Path | None:
-    """The source file of a module of the ``study`` package (found on disk, never imported), else None."""
+    """The source file of a module of the ``study`` package (found on disk, never imported), else
+    None."""
     if module != PACKAGE and not module.startswith(PACKAGE + "."):
         return None
     parts = module.split(".")
@@ -91,8 +99,8 @@ def _module_file(module: str) -> Path | None:
 
 
 def _external_file(module: str) -> Path | None:
-    """The source file of a module outside ``study`` (a user's own estimator class). ``find_spec`` of a dotted
-    name imports its parent packages (not the module itself)."""
+    """The source file of a module outside ``study`` (a user's own estimator class).
+    ``find_spec`` of a dotted name imports its parent packages (not the module itself)."""
     if not all(p.isidentifier() for p in module.split(".")):
         return None
     try:
@@ -119,9 +127,9 @@ _IMPORT = re.compile(r"^[ \t]*(?:from[ \t]+(\.*[\w.]*)[ \t]+import[ \t]+(\([^)]*
 def _imports(module: str) -> tuple:
     """The ``study`` modules that ``module`` imports anywhere in its source (sorted).
 
-    Import lines are found with a regular expression, not ``ast``: parsing and walking the package's trees cost
-    0.5-1 s a process, the expression 10 ms. An import line quoted at the start of a docstring line counts too,
-    which can only add a module to a component, never drop one.
+    Import lines are found with a regular expression, not ``ast``: parsing and walking the package's
+    trees cost 0.5-1 s a process, the expression 10 ms. An import line quoted at the start of a
+    docstring line counts too, which can only add a module to a component, never drop one.
     """
     path = _module_file(module)
     if path is None:
@@ -148,8 +156,8 @@ def _imports(module: str) -> tuple:
 
 @lru_cache(maxsize=None)
 def closure(entries: tuple) -> tuple:
-    """``entries`` and every ``study`` module they import, transitively (imports from outside an optional
-    package into it are not followed); sorted module names."""
+    """``entries`` and every ``study`` module they import, transitively (imports from outside an
+    optional package into it are not followed); sorted module names."""
     seen: set = set()
     todo = list(entries)
     while todo:
@@ -177,15 +185,16 @@ def _digest(data: bytes) -> str:
 
 @lru_cache(maxsize=None)
 def file_bytes_hash(path: Path) -> str:
-    """sha256 of a file's contents with CRLF and CR line endings made LF (first :data:`FILE_DIGITS` hex digits):
-    how every file was hashed before :data:`SCHEME`, and how YAML still is."""
+    """sha256 of a file's contents with CRLF and CR line endings made LF (first
+    :data:`FILE_DIGITS` hex digits): how every file was hashed before :data:`SCHEME`, and how
+    YAML still is."""
     return _digest(path.read_bytes().replace(b"\r\n", b"\n").replace(b"\r", b"\n"))
 
 
 @lru_cache(maxsize=None)
 def file_hash(path: Path) -> str:
-    """sha256 of what a file contributes to a run: a Python module's :func:`executed_source`, any other file's
-    contents (line endings made LF; first :data:`FILE_DIGITS` hex digits)."""
+    """sha256 of what a file contributes to a run: a Python module's :func:`executed_source`, any
+    other file's contents (line endings made LF; first :data:`FILE_DIGITS` hex digits)."""
     if path.suffix != ".py":
         return file_bytes_hash(path)
     return _digest(executed_source(_read(path).replace("\r\n", "\n").replace("\r", "\n")).encode(
@@ -193,9 +202,10 @@ def file_hash(path: Path) -> str:
 
 
 def executed_source(text: str) -> str:
-    """``text`` (a module's source) without what Python does not execute: comments, statements that are a bare
-    string (docstrings), blank lines and trailing spaces. A source that does not parse is returned whole (hashed
-    as it is). Indentation and line breaks are kept: they are syntax."""
+    """``text`` (a module's source) without what Python does not execute: comments, statements
+    that are a bare string (docstrings), blank lines and trailing spaces. A source that does not
+    parse is returned whole (hashed as it is). Indentation and line breaks are kept: they are
+    syntax."""
     lines = text.split("\n")
     try:
         tree = ast.parse(text)
@@ -232,7 +242,8 @@ def executed_source(text: str) -> str:
 
 
 def _key(path: Path) -> str:
-    """A file's name in a fingerprint: its path relative to the repository (the same on every machine)."""
+    """A file's name in a fingerprint: its path relative to the repository (the same on every
+    machine)."""
     return path.resolve().relative_to(REPO_ROOT.resolve()).as_posix()
 
 
@@ -243,7 +254,8 @@ def _combine(files: dict) -> str:
 
 # ------------------------------------------------------------------------------------------------ a run
 def _names(value) -> list:
-    """Manoeuvre or effect names from a config value: a name, a list of names or of dicts with a name."""
+    """Manoeuvre or effect names from a config value: a name, a list of names or of dicts with a
+    name."""
     if value is None:
         return []
     items = value if isinstance(value, (list, tuple)) else [value]
@@ -263,9 +275,11 @@ def _data_file(group: str, name: str) -> Path | None:
 
 
 def entries(config: dict) -> dict:
-    """Per component, ``(entry modules, extra files as (name, path))`` of a run's configuration (see the module
+    """Per component, ``(entry modules, extra files as (name, path))`` of a run's configuration (see
+    the module
     docstring).
-    Keys a configuration lacks are simply not used (a hand-made configuration gets the generic modules)."""
+    Keys a configuration lacks are simply not used (a hand-made configuration gets the generic
+    modules)."""
     config = config if isinstance(config, dict) else {}
     vessel = config.get("vessel") if isinstance(config.get("vessel"), dict) else {}
     model = config.get("model") if isinstance(config.get("model"), dict) else {}
@@ -331,9 +345,10 @@ def code_fingerprint(config: dict) -> dict:
     Returns
     -------
     dict
-        ``fingerprint`` (hash of the components' hashes), ``components`` (``{component: hash}``, see the module
-        docstring) and ``files`` (``{path relative to the repository: hash of its contents}``, the union over
-        the components). Computed from the files on disk, once per process for each distinct set of modules.
+        ``fingerprint`` (hash of the components' hashes), ``components`` (``{component: hash}``, see
+        the module docstring) and ``files`` (``{path relative to the repository: hash of its
+        contents}``, the union over the components). Computed from the files on disk, once per
+        process for each distinct set of modules.
     """
     spec = tuple((name, mods, extra) for name, (mods, extra) in entries(config).items())
     fp, comps, files = _fingerprint_of(spec)
@@ -343,15 +358,15 @@ def code_fingerprint(config: dict) -> dict:
 
 
 def same_code(stored_fingerprint, current: dict) -> bool:
-    """Whether a table's ``code_fingerprint`` is the current code's, under either hashing (a run recorded before
-    :data:`SCHEME` holds the bytes' fingerprint)."""
+    """Whether a table's ``code_fingerprint`` is the current code's, under either hashing (a run
+    recorded before :data:`SCHEME` holds the bytes' fingerprint)."""
     return stored_fingerprint is not None and stored_fingerprint in (
         current["fingerprint"], (current.get("bytes") or {}).get("fingerprint"))
 
 
 def changed_components(stored: dict | None, current: dict) -> list:
-    """The components whose code differs between a record's ``code`` and the current one (``['unknown']`` for
-    a record without a fingerprint, ``[]`` when unchanged)."""
+    """The components whose code differs between a record's ``code`` and the current one
+    (``['unknown']`` for a record without a fingerprint, ``[]`` when unchanged)."""
     if not isinstance(stored, dict) or not isinstance(stored.get("components"), dict):
         return ["unknown"]
     if stored.get("scheme") != current.get("scheme") and isinstance(current.get("bytes"), dict):
@@ -363,6 +378,7 @@ def changed_components(stored: dict | None, current: dict) -> list:
 
 
 def clear_cache() -> None:
-    """Forget every file read and hash (for a process that edits the source it fingerprints: tests)."""
+    """Forget every file read and hash (for a process that edits the source it fingerprints:
+    tests)."""
     for f in (_module_file, _imports, closure, _read, file_hash, file_bytes_hash, _fingerprint_of):
         f.cache_clear()

@@ -64,9 +64,9 @@ def provenance() -> dict:
     Returns
     -------
     dict
-        ``git_rev`` (commit hash, ``-dirty`` appended with uncommitted changes, ``'unknown'`` outside a git
-        checkout), ``python`` and the versions of :data:`PROVENANCE_PACKAGES` (None when not installed),
-        ``platform``, ``hostname``, ``threads`` (``os.cpu_count()``), ``omp_num_threads`` and
-        ``numba_num_threads`` (the env variables, None when unset).
+        ``git_rev`` (commit hash, ``-dirty`` appended with uncommitted changes, ``'unknown'``
+        outside a git checkout), ``python`` and the versions of :data:`PROVENANCE_PACKAGES` (None
+        when not installed), ``platform``, ``hostname``, ``threads`` (``os.cpu_count()``),
+        ``omp_num_threads`` and ``numba_num_threads`` (the env variables, None when unset).
     """
     return dict(_provenance_cached())  # a fresh dict so callers cannot alter the cache

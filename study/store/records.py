@@ -1,11 +1,12 @@
-"""The run record: what every record holds, how a run is named (its run id), and the checks a record passes
-before it is written or enters a table.
+"""The run record: what every record holds, how a run is named (its run id), and the checks a record
+passes before it is written or enters a table.
 
-``run_id`` is the first 16 hex characters of the sha256 of the canonical JSON of the scientific configuration
-(everything but ``hydra`` and the keys in :data:`NON_SCIENTIFIC_KEYS`; numbers normalised so that ``0`` and
-``0.0`` are one id: :func:`canonical`). Replicate ``k >= 1`` of a configuration (one of its independent
-datasets, ``replicates=N``) hashes the pair ``{config, replicate: k}``; replicate 0 keeps the configuration's
-own id, so a run made before replication existed is replicate 0 of its configuration.
+``run_id`` is the first 16 hex characters of the sha256 of the canonical JSON of the scientific
+configuration (everything but ``hydra`` and the keys in :data:`NON_SCIENTIFIC_KEYS`; numbers
+normalised so that ``0`` and ``0.0`` are one id: :func:`canonical`). Replicate ``k >= 1`` of a
+configuration (one of its independent datasets, ``replicates=N``) hashes the pair ``{config,
+replicate: k}``; replicate 0 keeps the configuration's own id, so a run made before replication
+existed is replicate 0 of its configuration.
 """
 from __future__ import annotations
 
@@ -68,17 +69,19 @@ def is_count(x: Any) -> bool:
 
 
 def scientific_config(config: dict) -> dict:
-    """The part of ``config`` that defines the science of a run (drops :data:`NON_SCIENTIFIC_KEYS`)."""
+    """The part of ``config`` that defines the science of a run (drops
+    :data:`NON_SCIENTIFIC_KEYS`)."""
     return {k: v for k, v in config.items() if k not in NON_SCIENTIFIC_KEYS}
 
 
 def canonical(obj: Any) -> Any:
     """``obj`` with its numbers in one spelling, so that the same science hashes to one run id.
 
-    Hydra keeps a number as typed: ``noise.level=0`` is the int 0, the YAML's ``level: 0.0`` a float. Here every
-    int that a float represents exactly becomes that float (``0`` -> ``0.0``; larger ints stay ints), ``-0.0``
-    becomes ``0.0``, numpy scalars and arrays become Python numbers and lists, tuples lists. Bools and strings
-    are left as they are (``true`` is not ``1``; ``'0.01'`` is not ``0.01``).
+    Hydra keeps a number as typed: ``noise.level=0`` is the int 0, the YAML's ``level: 0.0`` a
+    float. Here every int that a float represents exactly becomes that float (``0`` -> ``0.0``;
+    larger ints stay ints), ``-0.0`` becomes ``0.0``, numpy scalars and arrays become Python numbers
+    and lists, tuples lists. Bools and strings are left as they are (``true`` is not ``1``;
+    ``'0.01'`` is not ``0.01``).
     """
     t = type(obj)  # exact types first: a records folder is thousands of configs, ABC checks are slow
     if t is dict:
@@ -115,16 +118,17 @@ def run_id(config: dict, replicate: int = 0) -> str:
     Parameters
     ----------
     config : dict
-        The resolved configuration (e.g. ``OmegaConf.to_container(cfg, resolve=True)``). Anything under
-        ``hydra`` and the top-level keys in :data:`NON_SCIENTIFIC_KEYS` are ignored.
+        The resolved configuration (e.g. ``OmegaConf.to_container(cfg, resolve=True)``). Anything
+        under ``hydra`` and the top-level keys in :data:`NON_SCIENTIFIC_KEYS` are ignored.
     replicate : int
-        Which independent dataset of the configuration (0, the default, is the configuration's own id).
+        Which independent dataset of the configuration (0, the default, is the configuration's own
+        id).
 
     Returns
     -------
     str
-        The first 16 hex characters of the digest; independent of key order, of how a number is spelt
-        (:func:`canonical`), of the process, and of how many replicates the job asked for.
+        The first 16 hex characters of the digest; independent of key order, of how a number is
+        spelt (:func:`canonical`), of the process, and of how many replicates the job asked for.
     """
     if not isinstance(config, dict):
         raise TypeError(f"run_id needs the configuration as a dict, got {type(config).__name__}")
@@ -138,12 +142,14 @@ def run_id(config: dict, replicate: int = 0) -> str:
 
 
 def record_problems(record: Any) -> list[str]:
-    """Everything wrong with ``record`` as a run record (empty when it is well-formed); never raises."""
+    """Everything wrong with ``record`` as a run record (empty when it is well-formed); never
+    raises."""
     return check_record(record)[0]
 
 
 def check_record(record: Any) -> tuple[list[str], str | None]:
-    """``(problems, run id of its config and replicate)`` of a record (the id is None when it cannot be made)."""
+    """``(problems, run id of its config and replicate)`` of a record (the id is None when it
+    cannot be made)."""
     cid = None
     if not isinstance(record, dict):
         return [f"a record must be a JSON object, got {type(record).__name__}"], cid
@@ -217,7 +223,8 @@ def check_record(record: Any) -> tuple[list[str], str | None]:
 
 
 def _kind(v: Any) -> str | None:
-    """A metric value's kind for its table column: number, text or flag (None and NaN say nothing)."""
+    """A metric value's kind for its table column: number, text or flag (None and NaN say
+    nothing)."""
     if v is None or (isinstance(v, float) and v != v):
         return None
     if isinstance(v, (bool, np.bool_)):
@@ -228,11 +235,12 @@ def _kind(v: Any) -> str | None:
 
 
 def mistyped_records(items: list) -> dict:
-    """``{file: reason}`` of the records, among ``items`` (``(file, record)`` pairs, each record well-formed on
-    its own), whose metric has the wrong type: a kind other than the one most records hold (a number on a tie), such as
-    text where the others hold a number. One such value would retype the metric's column for every row of
-    ``runs.parquet``; the record is left out instead, by name, as a malformed one is. A metric only some records
-    have, or of one kind in all, is kept (some metrics are text: ``prior_source``, notes, estimator diagnostics)."""
+    """``{file: reason}`` of the records, among ``items`` (``(file, record)`` pairs, each record
+    well-formed on its own), whose metric has the wrong type: a kind other than the one most
+    records hold (a number on a tie), such as text where the others hold a number. One such value
+    would retype the metric's column for every row of ``runs.parquet``; the record is left out
+    instead, by name, as a malformed one is. A metric only some records have, or of one kind in
+    all, is kept (some metrics are text: ``prior_source``, notes, estimator diagnostics)."""
     kinds: dict = {}
     for _, rec in items:
         for k, v in (rec.get("metrics") or {}).items():
@@ -254,7 +262,8 @@ def mistyped_records(items: list) -> dict:
 
 
 def validate_record(record: dict) -> None:
-    """Raise ``ValueError`` (with every problem listed) unless ``record`` is a well-formed run record
+    """Raise ``ValueError`` (with every problem listed) unless ``record`` is a well-formed run
+    record
     (:func:`record_problems`)."""
     errs = record_problems(record)
     if errs:

@@ -1,7 +1,7 @@
-"""The results folder: one atomic JSON record per run (the truth), each run's artefacts, claims that let one
-process compute a run while others wait or move on, and the two parquet tables rebuilt from the records
-(benchopt-style: the records are the truth, the tables a cache). It knows nothing of what a run computes:
-the executor (``study.run.executor``) hands it finished records.
+"""The results folder: one atomic JSON record per run (the truth), each run's artefacts, claims that
+let one process compute a run while others wait or move on, and the two parquet tables rebuilt from
+the records (benchopt-style: the records are the truth, the tables a cache). It knows nothing of
+what a run computes: the executor (``study.run.executor``) hands it finished records.
 
 Layout under the results folder ``root`` (default ``results/``, relative to the working directory)::
 
@@ -43,12 +43,14 @@ LEFTOVER_AGE = 3600.0
 
 
 class ResultsFolderError(RuntimeError):
-    """The results folder cannot be used (not writable, or a rebuild would empty a non-empty table)."""
+    """The results folder cannot be used (not writable, or a rebuild would empty a non-empty
+    table)."""
 
 
 @dataclass
 class StoreReport:
-    """What the last reading of the records met (:attr:`ResultStore.report`): nothing is left out silently."""
+    """What the last reading of the records met (:attr:`ResultStore.report`): nothing is left out
+    silently."""
 
     records: int = 0                                  #: valid records in the table (one per run)
     skipped: list = field(default_factory=list)       #: (file, reason) of records left out (malformed, misnamed)
@@ -68,12 +70,12 @@ class StoreReport:
 
 
 class Claim:
-    """The right to compute one run: an exclusive OS file lock ``records/.claims/<run_id>.lock``, held while the
-    run is computed, beside ``<run_id>.json`` saying who holds it.
+    """The right to compute one run: an exclusive OS file lock ``records/.claims/<run_id>.lock``,
+    held while the run is computed, beside ``<run_id>.json`` saying who holds it.
 
-    The lock is a ``filelock.FileLock`` (``flock``; on NFS the kernel maps it to a POSIX lock): the operating
-    system releases it when its process ends in any way, SIGKILL included, so a claim of a dead process is
-    never in the way (its ``.json`` is removed by the next ``collect``).
+    The lock is a ``filelock.FileLock`` (``flock``; on NFS the kernel maps it to a POSIX lock): the
+    operating system releases it when its process ends in any way, SIGKILL included, so a claim of a
+    dead process is never in the way (its ``.json`` is removed by the next ``collect``).
     """
 
     def __init__(self, store: "ResultStore", rid: str):
@@ -83,7 +85,8 @@ class Claim:
         self.lock = FileLock(str(store.claims_dir / f"{rid}.lock"))
 
     def holder(self) -> dict | None:
-        """``{host, pid, since}`` of the process that holds (or, if dead, last held) the claim, when known."""
+        """``{host, pid, since}`` of the process that holds (or, if dead, last held) the claim,
+        when known."""
         try:
             info = json.loads(self.info_path.read_text(encoding="utf-8"))
         except (OSError, ValueError):
@@ -91,7 +94,8 @@ class Claim:
         return info if isinstance(info, dict) else None
 
     def acquire(self, wait: bool = True) -> bool:
-        """Take the claim; False when another live process holds it and ``wait`` is False (else wait for it)."""
+        """Take the claim; False when another live process holds it and ``wait`` is False (else
+        wait for it)."""
         self.store.claims_dir.mkdir(parents=True, exist_ok=True)
         try:
             # a second, not 0: a peer's `collect` may hold the lock for a moment to test it (clean_leftovers)
@@ -117,18 +121,20 @@ _STATUS = re.compile(rb'"status":\s*"(\w+)"')
 
 
 class ResultStore:
-    """The results folder: records (the truth), artefacts, and the two parquet tables (rebuilt from records).
+    """The results folder: records (the truth), artefacts, and the two parquet tables (rebuilt from
+    records).
 
     Parameters
     ----------
     root : str or Path, optional
-        The results folder; default ``$STUDY_RESULTS_DIR`` if set, else ``results/`` in the working directory.
+        The results folder; default ``$STUDY_RESULTS_DIR`` if set, else ``results/`` in the working
+        directory.
 
     Attributes
     ----------
     report : StoreReport
-        What the last :meth:`tables` / :meth:`collect` met: records skipped and why, stale rows, crash
-        leftovers removed.
+        What the last :meth:`tables` / :meth:`collect` met: records skipped and why, stale rows,
+        crash leftovers removed.
     """
 
     def __init__(self, root: str | os.PathLike | None = None):
@@ -158,8 +164,9 @@ class ResultStore:
     def _read_path(self, path: Path) -> tuple[dict | None, str | None]:
         """``(record, None)`` of a well-formed record file, else ``(None, reason)``.
 
-        Well-formed: valid JSON of the right shape (:func:`study.store.records.record_problems`) whose file is
-        named by its own ``run_id`` (a copy under another name would be a second row of one run).
+        Well-formed: valid JSON of the right shape (:func:`study.store.records.record_problems`)
+        whose file is named by its own ``run_id`` (a copy under another name would be a second row
+        of one run).
         """
         try:
             rec = json.loads(path.read_text(encoding="utf-8"))
@@ -178,20 +185,21 @@ class ResultStore:
         return rec, None
 
     def read(self, rid: str) -> dict | None:
-        """The record of ``rid``, or None when absent, torn or malformed (such a record counts as absent: the
-        run is computed again and the bad file kept under ``records/failed/``)."""
+        """The record of ``rid``, or None when absent, torn or malformed (such a record counts as
+        absent: the run is computed again and the bad file kept under ``records/failed/``)."""
         return self._read_path(self.record_path(rid))[0]
 
     def finished(self, rid: str) -> bool:
-        """True when run ``rid`` need not run again: its record says 'ok' or 'skipped' ('failed' reruns)."""
+        """True when run ``rid`` need not run again: its record says 'ok' or 'skipped' ('failed'
+        reruns)."""
         rec = self.read(rid)
         return rec is not None and rec.get("status") in FINISHED_STATUSES
 
     def status_counts(self) -> dict:
-        """Runs in the records folder by status, for progress lines. A record is read once per store object
-        (and again only when replaced: every write is a new file), from its first bytes (records are written
-        run_id first, status second), so counting after every job of a long sweep stays cheap. A record whose
-        status is not a word is counted as ``malformed``."""
+        """Runs in the records folder by status, for progress lines. A record is read once per
+        store object (and again only when replaced: every write is a new file), from its first
+        bytes (records are written run_id first, status second), so counting after every job of a
+        long sweep stays cheap. A record whose status is not a word is counted as ``malformed``."""
         counts, names = {}, set()
         if not self.records_dir.is_dir():
             return counts
@@ -237,10 +245,11 @@ class ResultStore:
         return Claim(self, rid)
 
     def check_writable(self) -> None:
-        """Raise :class:`ResultsFolderError` unless files can be created in the results folder and its
-        ``records/`` (tried with a real file: permission bits say nothing about ACLs, read-only mounts, a full
-        disk or a file where the folder should be). Nothing is created: a folder not there yet is probed at its
-        nearest existing ancestor (a refused setting must leave no results folder behind)."""
+        """Raise :class:`ResultsFolderError` unless files can be created in the results folder
+        and its ``records/`` (tried with a real file: permission bits say nothing about ACLs,
+        read-only mounts, a full disk or a file where the folder should be). Nothing is created:
+        a folder not there yet is probed at its nearest existing ancestor (a refused setting must
+        leave no results folder behind)."""
         try:
             dirs = [d for d in (self.root, self.records_dir) if d.is_dir()]
             if not dirs:
@@ -261,8 +270,9 @@ class ResultStore:
                 "can create files in: set results_dir=<folder> or STUDY_RESULTS_DIR") from e
 
     def _archive(self, rid: str, dest: Path, when: str) -> None:
-        """Move run ``rid``'s record into ``dest`` (``records/failed/`` or ``records/superseded/``) as
-        ``<rid>.<when>.json`` and its artefact folder to ``artefacts/<dest name>/<rid>.<when>/``."""
+        """Move run ``rid``'s record into ``dest`` (``records/failed/`` or
+        ``records/superseded/``) as ``<rid>.<when>.json`` and its artefact folder to
+        ``artefacts/<dest name>/<rid>.<when>/``."""
         path = self.record_path(rid)
         if path.exists():
             dest.mkdir(parents=True, exist_ok=True)
@@ -274,20 +284,22 @@ class ResultStore:
             os.replace(adir, to)
 
     def write(self, record: dict, overwrite: bool = False, artefacts: dict | None = None) -> Path:
-        """Validate ``record``, add the provenance, and write it atomically as ``records/<run_id>.json``.
+        """Validate ``record``, add the provenance, and write it atomically as
+        ``records/<run_id>.json``.
 
         Parameters
         ----------
         record : dict
-            See :data:`study.store.records.REQUIRED_FIELDS` and ``results/README.md``. ``provenance`` is added
-            when absent.
+            See :data:`study.store.records.REQUIRED_FIELDS` and ``results/README.md``.
+            ``provenance`` is added when absent.
         overwrite : bool
-            Replace an existing 'ok' or 'skipped' record (otherwise ``FileExistsError``); the replaced record
-            is moved to ``records/superseded/<run_id>.<timestamp>.json`` and its artefacts to
-            ``artefacts/superseded/<run_id>.<timestamp>/`` (a re-run after a code change, or forced).
+            Replace an existing 'ok' or 'skipped' record (otherwise ``FileExistsError``); the
+            replaced record is moved to ``records/superseded/<run_id>.<timestamp>.json`` and its
+            artefacts to ``artefacts/superseded/<run_id>.<timestamp>/`` (a re-run after a code
+            change, or forced).
         artefacts : dict, optional
-            ``{relative name: bytes or path}``; bytes are written, paths moved into ``artefacts/<run_id>/``.
-            Their names are stored in the record's ``artefacts`` list.
+            ``{relative name: bytes or path}``; bytes are written, paths moved into
+            ``artefacts/<run_id>/``. Their names are stored in the record's ``artefacts`` list.
 
         Returns
         -------
@@ -297,16 +309,18 @@ class ResultStore:
         Raises
         ------
         FileExistsError
-            A finished ('ok'/'skipped') record of this run exists and ``overwrite`` is False; it is unchanged.
+            A finished ('ok'/'skipped') record of this run exists and ``overwrite`` is False; it is
+            unchanged.
         ValueError
-            The record or the artefacts are malformed (or its run id is not the run id of its config).
+            The record or the artefacts are malformed (or its run id is not the run id of its
+            config).
 
         Notes
         -----
         An existing 'failed' (or unreadable, or malformed) record is not lost: it is moved to
         ``records/failed/<run_id>.<timestamp>.json`` and its artefact folder, if any, to
-        ``artefacts/failed/<run_id>.<timestamp>/``. The check and the replace happen under a per-run file lock,
-        so two processes finishing the same run produce exactly one record.
+        ``artefacts/failed/<run_id>.<timestamp>/``. The check and the replace happen under a per-run
+        file lock, so two processes finishing the same run produce exactly one record.
         """
         validate_record(record)
         artefacts = check_artefacts(artefacts)
@@ -336,12 +350,13 @@ class ResultStore:
         return path
 
     def restamp(self, current, unchanged) -> tuple[int, int]:
-        """Re-label the code of finished records written under an older hashing of the same code: for each record
-        whose ``code`` has no ``scheme``, ``current(config)`` gives the code dict today and ``unchanged(old, new)``
-        whether the record's code is that code (``study.store.fingerprint``: the files' bytes are the same); if so the
-        record's ``code`` becomes today's, with the old fingerprint kept as ``code['restamped_from']``. Written
-        atomically under the run's lock; nothing else in the record changes. Returns (restamped, left as they
-        were: computed by other code, to be re-run)."""
+        """Re-label the code of finished records written under an older hashing of the same code:
+        for each record whose ``code`` has no ``scheme``, ``current(config)`` gives the code dict
+        today and ``unchanged(old, new)`` whether the record's code is that code
+        (``study.store.fingerprint``: the files' bytes are the same); if so the record's ``code``
+        becomes today's, with the old fingerprint kept as ``code['restamped_from']``. Written
+        atomically under the run's lock; nothing else in the record changes. Returns (restamped,
+        left as they were: computed by other code, to be re-run)."""
         done = left = 0
         for path in sorted(self.records_dir.glob("*.json")) if self.records_dir.is_dir() else []:
             rec, _ = self._read_path(path)
@@ -385,8 +400,8 @@ class ResultStore:
         """Temp files and folders of writes that never finished: ``(path, why, removable)``.
 
         Removable: written by a process of this host that is no longer running, or older than
-        :data:`LEFTOVER_AGE` (a writer on another host cannot be asked). Also the ``.json`` of claims whose
-        process has ended (their lock is free).
+        :data:`LEFTOVER_AGE` (a writer on another host cannot be asked). Also the ``.json`` of
+        claims whose process has ended (their lock is free).
         """
         now, out = time.time(), []
         for d in (self.root, self.records_dir, self.artefacts_root, self.claims_dir):
@@ -441,8 +456,8 @@ class ResultStore:
 
     # -- tables
     def records(self) -> list[dict]:
-        """The well-formed records; what was left out goes into :attr:`report` and a ``RuntimeWarning`` naming
-        its file."""
+        """The well-formed records; what was left out goes into :attr:`report` and a
+        ``RuntimeWarning`` naming its file."""
         rep = StoreReport()
         out = []
         for p in sorted(self.records_dir.glob("*.json")) if self.records_dir.is_dir() else []:
@@ -462,7 +477,8 @@ class ResultStore:
         return out
 
     def tables(self) -> tuple[pd.DataFrame, pd.DataFrame]:
-        """Build ``(runs, params)`` from the records without writing anything (see :attr:`report`)."""
+        """Build ``(runs, params)`` from the records without writing anything (see
+        :attr:`report`)."""
         runs, params, stale = tables.build(self.records())
         self.report.stale = stale
         return runs, params
@@ -470,16 +486,17 @@ class ResultStore:
     def collect(self, allow_empty: bool = False) -> tuple[pd.DataFrame, pd.DataFrame]:
         """Merge all records into ``runs.parquet`` and ``params.parquet`` and return them.
 
-        Each file is written to a temp file and ``os.replace``d, under ``root/.collect.lock``, so a reader
-        never sees a torn table and concurrent collectors never interleave. A malformed or misnamed record is
-        left out with a ``RuntimeWarning`` naming its file, and counted in :attr:`report`; crash leftovers are
-        removed first (:meth:`clean_leftovers`, also in :attr:`report`).
+        Each file is written to a temp file and ``os.replace``d, under ``root/.collect.lock``, so a
+        reader never sees a torn table and concurrent collectors never interleave. A malformed or
+        misnamed record is left out with a ``RuntimeWarning`` naming its file, and counted in
+        :attr:`report`; crash leftovers are removed first (:meth:`clean_leftovers`, also in
+        :attr:`report`).
 
         Raises
         ------
         ResultsFolderError
-            No well-formed record, and ``runs.parquet`` holds rows: a rebuild never replaces a non-empty table
-            with an empty one (a wrong ``root``?) unless ``allow_empty``.
+            No well-formed record, and ``runs.parquet`` holds rows: a rebuild never replaces a
+            non-empty table with an empty one (a wrong ``root``?) unless ``allow_empty``.
         """
         self.root.mkdir(parents=True, exist_ok=True)
         with FileLock(str(self.root / ".collect.lock"), timeout=_COLLECT_LOCK_TIMEOUT):
@@ -499,7 +516,8 @@ class ResultStore:
         return runs, params
 
     def load(self) -> tuple[pd.DataFrame, pd.DataFrame]:
-        """Read ``(runs, params)`` from the parquet files, collecting first when either is missing."""
+        """Read ``(runs, params)`` from the parquet files, collecting first when either is
+        missing."""
         if not (self.runs_path.exists() and self.params_path.exists()):
             return self.collect()
         return tables.read_table(self.runs_path), tables.read_table(self.params_path)

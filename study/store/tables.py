@@ -1,5 +1,6 @@
-"""The two parquet tables made from the records: ``runs`` (one row per run: one dataset of one configuration)
-and ``params`` (one row per identified coefficient of a run). Columns: ``results/README.md``."""
+"""The two parquet tables made from the records: ``runs`` (one row per run: one dataset of one
+configuration) and ``params`` (one row per identified coefficient of a run). Columns:
+``results/README.md``."""
 from __future__ import annotations
 
 import io
@@ -28,7 +29,8 @@ _FLOAT_COLUMNS = ("wall_time", "estimate", "truth", "rel_error", "abs_error", *P
 
 
 def flatten(d: dict, prefix: str = "") -> dict:
-    """Dotted keys for nested dicts; list leaves and empty dicts become JSON so each column has one type."""
+    """Dotted keys for nested dicts; list leaves and empty dicts become JSON so each column has
+    one type."""
     out = {}
     for k, v in d.items():
         key = f"{prefix}{k}"
@@ -63,8 +65,8 @@ def _finite_float(x: Any) -> float:
 
 
 def replicate_of(rec: dict) -> tuple[int, int | None]:
-    """``(replicate, dataset seed)`` of a record; a record made before replication is replicate 0 of its
-    configuration, drawn from its own seed."""
+    """``(replicate, dataset seed)`` of a record; a record made before replication is replicate 0
+    of its configuration, drawn from its own seed."""
     rep = rec.get("replicate")
     rep = int(rep) if rep is not None else 0
     ds = rec.get("dataset_seed")
@@ -72,8 +74,8 @@ def replicate_of(rec: dict) -> tuple[int, int | None]:
 
 
 def run_row(rec: dict, current_code: dict | None = None) -> dict:
-    """One row of runs.parquet; ``current_code``: the fingerprint of the code as it is now, for the run's
-    configuration (``code_current``, ``code_changed``)."""
+    """One row of runs.parquet; ``current_code``: the fingerprint of the code as it is now, for
+    the run's configuration (``code_current``, ``code_changed``)."""
     timings = rec.get("timings") or {}
     wall = timings.get("wall")
     if not is_number(wall):
@@ -100,7 +102,8 @@ def run_row(rec: dict, current_code: dict | None = None) -> dict:
 
 
 def param_rows(rec: dict, row: dict) -> list[dict]:
-    """The params.parquet rows of one record (``row``: its runs.parquet row, for the copied config columns)."""
+    """The params.parquet rows of one record (``row``: its runs.parquet row, for the copied
+    config columns)."""
     copied = {c: row[c] for c in PARAM_CONFIG_COLUMNS if c in row}
     rows = []
     for p in rec.get("params") or []:
@@ -129,7 +132,8 @@ def frame(rows: list[dict], base: list[str]) -> pd.DataFrame:
 
 
 def build(records: list[dict]) -> tuple[pd.DataFrame, pd.DataFrame, int]:
-    """``(runs, params, stale)`` of well-formed records; ``stale``: rows whose code differs from today's."""
+    """``(runs, params, stale)`` of well-formed records; ``stale``: rows whose code differs from
+    today's."""
     import warnings
 
     runs, params = [], []
@@ -168,9 +172,9 @@ def table_rows(path: Path) -> int:
 def read_table(path) -> pd.DataFrame:
     """Read a parquet table safely while a collector may be replacing it.
 
-    The file is read into memory with one open() first: pyarrow's reader opens a path more than once (footer,
-    then pages), and between two opens ``os.replace`` may swap in the new file, giving "Page was smaller than
-    expected". One open pins one inode, so the snapshot is always whole.
+    The file is read into memory with one open() first: pyarrow's reader opens a path more than once
+    (footer, then pages), and between two opens ``os.replace`` may swap in the new file, giving
+    "Page was smaller than expected". One open pins one inode, so the snapshot is always whole.
     """
     with open(path, "rb") as fh:
         data = fh.read()

@@ -1,10 +1,12 @@
-"""emcee on larger exact models (the MMG hull of KVLCC2, the waterjet USV's full model): are the regression
-likelihood's 90 % intervals calibrated, per dataset and per coefficient, and does the run's own trust flag fire where
-they are not (no noise, coarse sampling, coloured noise, a model missing a term)?
+"""emcee on larger exact models (the MMG hull of KVLCC2, the waterjet USV's full model): are the
+regression likelihood's 90 % intervals calibrated, per dataset and per coefficient, and does the
+run's own trust flag fire where they are not (no noise, coarse sampling, coloured noise, a model
+missing a term)?
 
-``build`` writes the study's figures and tables into ``paper_figs/emcee_calibration/`` and appends its claims to
-``claims``; ``python -m study figures`` finds this module by the study's name
-(``conf/experiment/emcee_calibration.yaml``). Coverage verdicts as in emcee_kt, the dataset as the unit
+``build`` writes the study's figures and tables into ``paper_figs/emcee_calibration/`` and appends
+its claims to ``claims``; ``python -m study figures`` finds this module by the study's name
+(``conf/experiment/emcee_calibration.yaml``). Coverage verdicts as in emcee_kt, the dataset as the
+unit
 (:func:`study.figures.verdicts.coverage_over_datasets`)."""
 from __future__ import annotations
 
@@ -98,10 +100,11 @@ def build(b: Builder, runs, params, claims):
 
 
 def _own_best_fit(p: pd.DataFrame) -> pd.DataFrame:
-    """Where the model lacks a term, what the trusted runs' intervals cover: the vessel's values, and the model's
-    own best fit, its estimate from the noise-free records of the same dataset (same dataset seed, so the same
-    random rudder; same model, structure and sampling interval). The gap between the two is the missing term's
-    error, which the intervals do not claim to hold."""
+    """Where the model lacks a term, what the trusted runs' intervals cover: the vessel's values,
+    and the model's own best fit, its estimate from the noise-free records of the same dataset
+    (same dataset seed, so the same random rudder; same model, structure and sampling interval).
+    The gap between the two is the missing term's error, which the intervals do not claim to
+    hold."""
     key = ["cfg_model.name", "cfg_structure.name", "omit", "coarse", "replicate", "name"]
     if "replicate" not in p:
         return pd.DataFrame()
@@ -170,10 +173,11 @@ def _trust_figure(b: Builder, cov: pd.DataFrame):
 
 
 def claim(cov: pd.DataFrame, own: pd.DataFrame | None = None) -> list:
-    """(a) the regression likelihood's intervals are calibrated on each model and structure where its assumptions
-    hold; (b) wherever a run says its intervals are trusted they cover 80-97 % (every condition), and runs are
-    flagged where the assumptions fail; (c) where the model lacks a term, the trusted runs' intervals cover the
-    model's own best fit (what "trusted" can promise where the flag misses a term the model's others absorb)."""
+    """(a) the regression likelihood's intervals are calibrated on each model and structure where
+    its assumptions hold; (b) wherever a run says its intervals are trusted they cover 80-97 %
+    (every condition), and runs are flagged where the assumptions fail; (c) where the model lacks
+    a term, the trusted runs' intervals cover the model's own best fit (what "trusted" can
+    promise where the flag misses a term the model's others absorb)."""
     out = []
     allr = cov[cov["runs"] == "all"]
     nom = allr[allr["condition"] == "as assumed"]

@@ -1,16 +1,19 @@
-"""emcee on Nomoto models: are the 90 % intervals calibrated, per likelihood, structure, noise and sampling interval?
+"""emcee on Nomoto models: are the 90 % intervals calibrated, per likelihood, structure, noise and
+sampling interval?
 
-``build`` writes the study's figures and tables into ``paper_figs/emcee_kt/`` and appends its claims to ``claims``;
-``python -m study figures`` finds this module by the study's name (``conf/experiment/emcee_kt.yaml``).
+``build`` writes the study's figures and tables into ``paper_figs/emcee_kt/`` and appends its claims
+to ``claims``; ``python -m study figures`` finds this module by the study's name
+(``conf/experiment/emcee_kt.yaml``).
 
-How a calibration verdict is decided: over the datasets (seeds) of one set-up, each coefficient's 90 % interval
-either holds the truth or not. The coverage (the share of intervals that hold it) comes with a 95 % bootstrap
-interval over datasets: the intervals of one dataset miss together, so they are resampled together
-(:func:`study.figures.verdicts.coverage_over_datasets`). "About 90 %" is the band 80-97 %: **holds** when the
-coverage lies in it; **does not hold** when its interval lies wholly outside it; **cannot tell** otherwise (too few
-datasets to tell). Whether the interval lies below or above 90 % is said beside the verdict. Each claim is
-then restated under every other set-up of the sweep (noise definition, sampling interval): a verdict that changes
-says "depends on ..."."""
+How a calibration verdict is decided: over the datasets (seeds) of one set-up, each coefficient's
+90 % interval either holds the truth or not. The coverage (the share of intervals that hold it)
+comes with a 95 % bootstrap interval over datasets: the intervals of one dataset miss together,
+so they are resampled together (:func:`study.figures.verdicts.coverage_over_datasets`). "About 90
+%" is the band 80-97 %: **holds** when the coverage lies in it; **does not hold** when its
+interval lies wholly outside it; **cannot tell** otherwise (too few datasets to tell). Whether
+the interval lies below or above 90 % is said beside the verdict. Each claim is then restated
+under every other set-up of the sweep (noise definition, sampling interval): a verdict that
+changes says "depends on ..."."""
 from __future__ import annotations
 
 import math
@@ -95,9 +98,9 @@ def _trust(v) -> str:
 
 
 def trust_table(p: pd.DataFrame) -> pd.DataFrame:
-    """Coverage of the regression likelihood's intervals split by the run's own flag, per structure, noise and
-    sampling interval: the flag is worth having when the trusted runs are calibrated and the flagged ones are the
-    runs that miss."""
+    """Coverage of the regression likelihood's intervals split by the run's own flag, per
+    structure, noise and sampling interval: the flag is worth having when the trusted runs are
+    calibrated and the flagged ones are the runs that miss."""
     reg = p[p["likelihood"] == "regression"]
     rows = []
     keys = ["cfg_structure.name", "cfg_noise.name", "cfg_noise.sample_dt_LU", "trusted"]
@@ -113,10 +116,11 @@ def trust_table(p: pd.DataFrame) -> pd.DataFrame:
 
 
 def trust_claim(p: pd.DataFrame, b: Builder | None = None) -> list:
-    """(c) The runs' own flag: over every regression set-up of the sweep, the intervals of the runs that call
-    themselves trusted cover the truth about 90 % of the time (decided as every coverage verdict here, on the
-    trusted runs of each structure, all noise definitions and sampling intervals of the one KT model together:
-    the flag is meant to hold whatever the set-up); beside it the coverage of the runs that flag themselves."""
+    """(c) The runs' own flag: over every regression set-up of the sweep, the intervals of the
+    runs that call themselves trusted cover the truth about 90 % of the time (decided as every
+    coverage verdict here, on the trusted runs of each structure, all noise definitions and
+    sampling intervals of the one KT model together: the flag is meant to hold whatever the
+    set-up); beside it the coverage of the runs that flag themselves."""
     text = ("an emcee regression run that says its intervals can be trusted (m_intervals_trusted, from its own "
             "records) has intervals that cover the truth about 90 % of the time")
     t = trust_table(p) if len(p) and "trusted" in p else pd.DataFrame()
@@ -144,8 +148,8 @@ def trust_claim(p: pd.DataFrame, b: Builder | None = None) -> list:
 
 
 def _sensitivity(cov: pd.DataFrame, primary: pd.Series) -> pd.DataFrame:
-    """The primary set-up's verdict, then the same likelihood and structure under every other noise and sampling
-    interval of the sweep."""
+    """The primary set-up's verdict, then the same likelihood and structure under every other
+    noise and sampling interval of the sweep."""
     same = cov[(cov["likelihood"] == primary["likelihood"]) & (cov["structure"] == primary["structure"])]
     out = [{"choice": "primary", **primary.to_dict()}]
     for _, o in same.iterrows():
@@ -160,9 +164,10 @@ def _line(c) -> str:
 
 
 def claim(cov: pd.DataFrame, b: Builder | None = None) -> list:
-    """Two claims: (a) output error with noise on the outputs only, the likelihood's own assumption; (b) the
-    regression likelihood that models the rows' noise, per regression structure (the iid likelihood beside it,
-    for the record). Each at the finest sampling with noise on the outputs only, restated under the other set-ups."""
+    """Two claims: (a) output error with noise on the outputs only, the likelihood's own
+    assumption; (b) the regression likelihood that models the rows' noise, per regression
+    structure (the iid likelihood beside it, for the record). Each at the finest sampling with
+    noise on the outputs only, restated under the other set-ups."""
     texts = {"a": "emcee's 90 % intervals cover the truth about 90 % of the time when the output-error likelihood's "
                   "assumptions hold (noise on the outputs only)",
              "b": "with the regression likelihood that models the rows' noise and removes their truncation and the "

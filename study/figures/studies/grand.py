@@ -1,12 +1,14 @@
-"""The grand cross: every estimator and structure over vessels, noise levels, depths and sampling intervals; does
-drift grow with noise?
+"""The grand cross: every estimator and structure over vessels, noise levels, depths and sampling
+intervals; does drift grow with noise?
 
-``build`` writes the study's figures and tables into ``paper_figs/grand/`` and appends its claim to ``claims``;
-``python -m study figures`` finds this module by the study's name (``conf/experiment/grand.yaml``).
+``build`` writes the study's figures and tables into ``paper_figs/grand/`` and appends its claim to
+``claims``; ``python -m study figures`` finds this module by the study's name
+(``conf/experiment/grand.yaml``).
 
-Nothing is pooled across models: every figure has one row of panels per vessel and model (each with its own
-coefficient count), and the claim is decided per model with the dataset as the unit (:mod:`study.figures.verdicts`),
-then per model x structure x estimator cell, with the verdict under every other reasonable choice beside it."""
+Nothing is pooled across models: every figure has one row of panels per vessel and model (each
+with its own coefficient count), and the claim is decided per model with the dataset as the unit
+(:mod:`study.figures.verdicts`), then per model x structure x estimator cell, with the verdict
+under every other reasonable choice beside it."""
 from __future__ import annotations
 
 import pandas as pd
@@ -29,9 +31,10 @@ def _model(df: pd.DataFrame) -> pd.Series:
 
 
 def _sampling(df: pd.DataFrame) -> list:
-    """The sampling intervals the sweep asked for (``cfg_noise.sample_dt_LU``, in L/U0), finest first, as (column,
-    value); [(None, None)] for a sweep that did not ask (each vessel at its default interval, named in the titles).
-    The requested value, not the realised one: each vessel decimates a request to its own nearest step."""
+    """The sampling intervals the sweep asked for (``cfg_noise.sample_dt_LU``, in L/U0), finest
+    first, as (column, value); [(None, None)] for a sweep that did not ask (each vessel at its
+    default interval, named in the titles). The requested value, not the realised one: each
+    vessel decimates a request to its own nearest step."""
     col = "cfg_noise.sample_dt_LU"
     if col in df and df[col].notna().any():
         return [(col, v) for v in sorted(df[col].dropna().unique())]
@@ -64,8 +67,9 @@ def build(b: Builder, runs, params, claims, s="grand"):
 
 
 def _drift_figure(b: Builder, s: str, q: pd.DataFrame, axis: str, by: str, order: list, tag: str):
-    """Median |relative error| against ``by``: a row of panels per model, a column per structure, a line per
-    estimator. Medians are over depths (or noise levels), seeds and the model's own coefficients only."""
+    """Median |relative error| against ``by``: a row of panels per model, a column per structure,
+    a line per estimator. Medians are over depths (or noise levels), seeds and the model's own
+    coefficients only."""
     plt = _plt()
     vals = _order(q[by], order)
     if len(vals) < 2:
@@ -115,12 +119,14 @@ DATASET = ["cfg_vessel.name", "cfg_model.name", "cfg_depth.h_T", "cfg_seed", "m_
 
 
 def claim(b: Builder, p: pd.DataFrame, s: str = NAME, runs_all: pd.DataFrame | None = None) -> dict:
-    """'Drift grows with the noise level', decided with the dataset as the unit: the same records (vessel, model,
-    depth, seed, replicate, sampling interval) measured at the lowest and at the highest noise level of the sweep
-    (the relative definition scales the same draws). Per model, one error per dataset: the median relative error
-    over every structure, estimator and coefficient of its fits (the structures and estimators of one dataset are
-    the same records, not more evidence); then per model x structure x estimator cell over its datasets (the claim
-    says "every estimator and structure"). A model that no estimator identifies is reported apart."""
+    """'Drift grows with the noise level', decided with the dataset as the unit: the same records
+    (vessel, model, depth, seed, replicate, sampling interval) measured at the lowest and at the
+    highest noise level of the sweep (the relative definition scales the same draws). Per model,
+    one error per dataset: the median relative error over every structure, estimator and
+    coefficient of its fits (the structures and estimators of one dataset are the same records,
+    not more evidence); then per model x structure x estimator cell over its datasets (the claim
+    says "every estimator and structure"). A model that no estimator identifies is reported
+    apart."""
     text = "parameter drift grows with the noise level for every estimator and structure"
     noises = _order(p["cfg_noise.name"], NOISE_ORDER) if len(p) else []
     if len(noises) < 2:

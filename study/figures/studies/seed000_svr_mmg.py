@@ -1,8 +1,9 @@
-"""Song et al. (2025): SVR identification of a simplified MMG model; differenced and centred samples against
-forward differences, and Lasso's term selection.
+"""Song et al. (2025): SVR identification of a simplified MMG model; differenced and centred samples
+against forward differences, and Lasso's term selection.
 
-``build`` writes the study's figures and tables into ``paper_figs/seed000_svr_mmg/`` and appends its claim (if any) to
-``claims``; ``python -m study figures`` finds this module by the study's name (``conf/experiment/seed000_svr_mmg.yaml``)."""
+``build`` writes the study's figures and tables into ``paper_figs/seed000_svr_mmg/`` and appends
+its claim (if any) to ``claims``; ``python -m study figures`` finds this module by the study's
+name (``conf/experiment/seed000_svr_mmg.yaml``)."""
 from __future__ import annotations
 
 import pandas as pd
@@ -92,7 +93,8 @@ CLAIM = ("differencing and centring the samples (diff_center) reduces the parame
 
 
 def _subsets(q: pd.DataFrame, runs: pd.DataFrame) -> list:
-    """The claim's other choices: each noise level (noise-free: one dataset), the coarser sampling interval."""
+    """The claim's other choices: each noise level (noise-free: one dataset), the coarser
+    sampling interval."""
     own, other_dts = finest(q)
     ro = finest(runs)[0]
     out = [(f"noise {nz} only" + (" (one dataset: nothing drawn at random)" if nz == "none" else ""),
@@ -107,10 +109,11 @@ def _subsets(q: pd.DataFrame, runs: pd.DataFrame) -> list:
 
 
 def claim(b: Builder, r, p) -> list:
-    """Song et al.'s (2025) compound claim split in three, each decided over datasets (study/figures/verdicts.py):
-    SVR on differenced and centred rows against forward differences, on the seed's simplified model, noisy datasets
-    at the seed's 0.1 s (the full model, the noise-free dataset, the coarser interval and the scoring choices are the
-    sensitivity table); the same for every other estimator, one verdict each; Lasso dropping N'vrr and N'vvr, per
+    """Song et al.'s (2025) compound claim split in three, each decided over datasets
+    (study/figures/verdicts.py): SVR on differenced and centred rows against forward differences,
+    on the seed's simplified model, noisy datasets at the seed's 0.1 s (the full model, the
+    noise-free dataset, the coarser interval and the scoring choices are the sensitivity table);
+    the same for every other estimator, one verdict each; Lasso dropping N'vrr and N'vvr, per
     dataset of a set-up."""
     runs_all = b.all_runs if b.all_runs is not None else r
     runs_all = runs_all[runs_all["cfg_structure.name"].isin(["euler", "diff_center"])]
@@ -158,9 +161,9 @@ def claim(b: Builder, r, p) -> list:
 
 
 def _lasso_claim(b: Builder, p) -> list:
-    """Lasso drops N'vrr and N'vvr: a property of each dataset (both dropped or not), decided over the datasets of a
-    set-up (the structures of one dataset are the same records, not more evidence); primary: diff_center rows
-    (the seed's improved samples), noisy, the seed's 0.1 s."""
+    """Lasso drops N'vrr and N'vvr: a property of each dataset (both dropped or not), decided
+    over the datasets of a set-up (the structures of one dataset are the same records, not more
+    evidence); primary: diff_center rows (the seed's improved samples), noisy, the seed's 0.1 s."""
     las = p[(p["cfg_model.name"] == "usv_full") & (p["cfg_estimator.name"] == "lasso") & p["name"].isin(["Nvrr", "Nvvr"])]
     if not len(las) or not las["selected"].notna().any():
         return []

@@ -1,8 +1,9 @@
-"""Xu & Guedes Soares: Nomoto models in shallow water identified by the truncated LS-SVM against least
-squares, LS-SVM and nu-SVR.
+"""Xu & Guedes Soares: Nomoto models in shallow water identified by the truncated LS-SVM against
+least squares, LS-SVM and nu-SVR.
 
-``build`` writes the study's figures and tables into ``paper_figs/seed001_shallow_water/`` and appends its claim (if any) to
-``claims``; ``python -m study figures`` finds this module by the study's name (``conf/experiment/seed001_shallow_water.yaml``)."""
+``build`` writes the study's figures and tables into ``paper_figs/seed001_shallow_water/`` and
+appends its claim (if any) to ``claims``; ``python -m study figures`` finds this module by the
+study's name (``conf/experiment/seed001_shallow_water.yaml``)."""
 from __future__ import annotations
 
 import numpy as np
@@ -48,8 +49,9 @@ def build(b: Builder, runs, params, claims):
 
 
 def _with_depth(b: Builder, runs, params):
-    """The study's runs and params rows, each with its h/T column (NaN in deep water), the params with their h/T
-    label ``hT`` and non-dimensional values; ``b.all_runs`` gets the h/T column too."""
+    """The study's runs and params rows, each with its h/T column (NaN in deep water), the params
+    with their h/T label ``hT`` and non-dimensional values; ``b.all_runs`` gets the h/T column
+    too."""
     r, p = runs[runs["cfg_study"] == NAME], params[params["cfg_study"] == NAME]
     # a table of deep water only has no h/T column (empty columns are not stored)
     r, p = (d.assign(**{"cfg_depth.h_T": d.get("cfg_depth.h_T", np.nan)}) for d in (r, p))
@@ -61,8 +63,8 @@ def _with_depth(b: Builder, runs, params):
 
 
 def _non_dimensional(p) -> None:
-    """Add to ``p`` the non-dimensional estimate and truth (``estimate_nd``, ``truth_nd``) of the Nomoto
-    parameters: K' = K L/U0, T' = T U0/L, alpha' = alpha (U0/L)^2."""
+    """Add to ``p`` the non-dimensional estimate and truth (``estimate_nd``, ``truth_nd``) of the
+    Nomoto parameters: K' = K L/U0, T' = T U0/L, alpha' = alpha (U0/L)^2."""
     L = p["cfg_vessel.particulars.Lpp"].astype(float)
     U = p["cfg_vessel.operation.U0"].astype(float)
     nd = {"K": L / U, "T": U / L, "T1": U / L, "T2": U / L, "T3": U / L, "alpha": (U / L) ** 2}
@@ -75,7 +77,8 @@ def _non_dimensional(p) -> None:
 
 
 def _kt_vs_hT(b: Builder, p, at: str) -> None:
-    """KCS's non-dimensional Nomoto parameters against h/T: a figure per model, and a table of them all."""
+    """KCS's non-dimensional Nomoto parameters against h/T: a figure per model, and a table of
+    them all."""
     rows = []
     for model, names in (("nomoto1_nl", ["K", "T"]), ("nomoto2_nl", ["K", "T1", "T3"])):
         q = p[(p["cfg_model.name"] == model) & (p["cfg_vessel.name"] == "kcs")]
@@ -88,8 +91,8 @@ def _kt_vs_hT(b: Builder, p, at: str) -> None:
 
 
 def _kt_vs_hT_figure(b: Builder, q, model: str, names: list, at: str) -> list:
-    """The figure of one model's parameters ``names`` (rows) per noise level (columns), a line style per speed;
-    the rows of the table it draws."""
+    """The figure of one model's parameters ``names`` (rows) per noise level (columns), a line
+    style per speed; the rows of the table it draws."""
     plt = _plt()
     speeds = sorted(q["cfg_vessel.operation.U0"].dropna().unique(), reverse=True)
     noises = _order(q["cfg_noise.name"], NOISE_ORDER)
@@ -116,8 +119,8 @@ def _kt_vs_hT_figure(b: Builder, q, model: str, names: list, at: str) -> list:
 
 
 def _kt_panel(ax, q, model: str, n: str, nz: str, speeds: list, styles: dict, ests: list) -> list:
-    """Parameter ``n`` at noise ``nz`` against h/T: the derived truth and each estimator's median, a line per
-    speed; the rows of the table it draws."""
+    """Parameter ``n`` at noise ``nz`` against h/T: the derived truth and each estimator's
+    median, a line per speed; the rows of the table it draws."""
     rows = []
     for sp in speeds:
         ls_ = styles[sp]
@@ -138,7 +141,8 @@ def _kt_panel(ax, q, model: str, n: str, nz: str, speeds: list, styles: dict, es
 
 
 def _kt_panel_axes(ax, n: str, nz: str, bottom: bool) -> str:
-    """The ticks, title, scale and labels of a panel of parameter ``n`` at noise ``nz``; the scale chosen."""
+    """The ticks, title, scale and labels of a panel of parameter ``n`` at noise ``nz``; the
+    scale chosen."""
     ax.set_xticks(range(len(HT_ORDER)), HT_ORDER)
     ax.set_title(f"{n}', noise {nz}")
     # chosen from the values: log where every value is positive, linear where they change sign but stay small,
@@ -153,7 +157,8 @@ def _kt_panel_axes(ax, n: str, nz: str, bottom: bool) -> str:
 
 
 def _kt_legend_handles(ests: list, styles: dict, speeds: list) -> list:
-    """The legend of the parameter figures: the estimators, the derived truth and the speeds' line styles."""
+    """The legend of the parameter figures: the estimators, the derived truth and the speeds'
+    line styles."""
     from matplotlib.lines import Line2D
 
     return ([Line2D([], [], ms=5, lw=0.9, mec="black", mew=0.3, label=e, **estimator_style(e)) for e in ests]
@@ -162,8 +167,8 @@ def _kt_legend_handles(ests: list, styles: dict, speeds: list) -> list:
 
 
 def _drift_vs_noise(b: Builder, p, at: str) -> None:
-    """The median drift of the Nomoto parameters from the derived truth against the noise level, per estimator:
-    a figure (a panel per model) and its table."""
+    """The median drift of the Nomoto parameters from the derived truth against the noise level,
+    per estimator: a figure (a panel per model) and its table."""
     q = p[p["truth_kind"] == "derived"]
     if not len(q):
         return
@@ -192,8 +197,8 @@ def _drift_vs_noise(b: Builder, p, at: str) -> None:
 
 
 def _lcurve_runs(r) -> list:
-    """The runs whose L-curve is drawn, with their labels: the truncated LS-SVM on KCS at its service speed in
-    deep water, central differences, without noise and at medium noise."""
+    """The runs whose L-curve is drawn, with their labels: the truncated LS-SVM on KCS at its
+    service speed in deep water, central differences, without noise and at medium noise."""
     ent = []
     kcs = r[(r["cfg_vessel.name"] == "kcs") & r["cfg_depth.h_T"].isna()]
     if len(kcs):
@@ -220,19 +225,21 @@ CLAIM = "the truncated LS-SVM improves the estimates under noise against least s
 
 
 def claim(b: Builder, r, p) -> list:
-    """Xu & Guedes Soares's compound claim split in three. (a) the truncated LS-SVM beats least squares, LS-SVM and
-    nu-SVR under noise, decided per model and comparator on the exact KT truths (KCS's Nomoto "truth" is a
-    linearisation of an MMG vessel, not a truth: not scored), over noisy datasets, on the datasets where the
-    truncation acted (the mechanism the claim is about; how often it acted is said); the set-up where it can act
-    as the paper intends is the study seed001_truncation. (b) how often truncation acts, per set-up. (c) shallow water
-    changes the identified K' and T' strongly: a consistency check (the simulator imposes the shallow-water
-    correction), on the fits that identify the model."""
+    """Xu & Guedes Soares's compound claim split in three. (a) the truncated LS-SVM beats least
+    squares, LS-SVM and nu-SVR under noise, decided per model and comparator on the exact KT
+    truths (KCS's Nomoto "truth" is a linearisation of an MMG vessel, not a truth: not scored),
+    over noisy datasets, on the datasets where the truncation acted (the mechanism the claim is
+    about; how often it acted is said); the set-up where it can act as the paper intends is the
+    study seed001_truncation. (b) how often truncation acts, per set-up. (c) shallow water
+    changes the identified K' and T' strongly: a consistency check (the simulator imposes the
+    shallow-water correction), on the fits that identify the model."""
     runs_all = b.all_runs if b.all_runs is not None else r
     return _tlssvm_claim(b, p, runs_all) + _truncation_claim(b, runs_all) + _shallow_water_claim(p)
 
 
 def _exact_noisy(p, runs_all):
-    """The params rows and runs of the claim's comparison: the exact KT truths, with noise, at one speed."""
+    """The params rows and runs of the claim's comparison: the exact KT truths, with noise, at
+    one speed."""
     q = p[(p["truth_kind"] == "exact") & (p["cfg_noise.name"] != "none")]
     rq = runs_all[runs_all["cfg_vessel.name"].isin(set(q["cfg_vessel.name"])) & (runs_all["cfg_noise.name"] != "none")]
     if "cfg_vessel.operation.U0" in q and q["cfg_vessel.operation.U0"].nunique() > 1:
@@ -243,8 +250,9 @@ def _exact_noisy(p, runs_all):
 
 
 def _subsets(d, rd, da, ra) -> list:
-    """The choices a comparison is repeated under: every noisy dataset (``d``, ``rd``), and, on the datasets where
-    the truncation acted (``da``, ``ra``), each structure's rows and each noise level."""
+    """The choices a comparison is repeated under: every noisy dataset (``d``, ``rd``), and, on
+    the datasets where the truncation acted (``da``, ``ra``), each structure's rows and each
+    noise level."""
     subsets = [("every noisy dataset (truncation acted or not)", d, rd)]
     for st in sorted(da["cfg_structure.name"].unique()):
         subsets.append((f"{st} rows only", da[da["cfg_structure.name"] == st], ra[ra["cfg_structure.name"] == st]))
@@ -254,8 +262,8 @@ def _subsets(d, rd, da, ra) -> list:
 
 
 def _tlssvm_claim(b: Builder, p, runs_all) -> list:
-    """Claim (a): the truncated LS-SVM against each other estimator, per model, the dataset as the unit; its
-    sensitivity table into ``b``."""
+    """Claim (a): the truncated LS-SVM against each other estimator, per model, the dataset as
+    the unit; its sensitivity table into ``b``."""
     from ._truncation import acted, on_datasets
 
     q, rq = _exact_noisy(p, runs_all)
@@ -287,7 +295,8 @@ def _tlssvm_claim(b: Builder, p, runs_all) -> list:
 
 
 def _truncation_claim(b: Builder, runs_all) -> list:
-    """Claim (b): how often the truncated LS-SVM's L-curve drops a column; its table per set-up into ``b``."""
+    """Claim (b): how often the truncated LS-SVM's L-curve drops a column; its table per set-up
+    into ``b``."""
     from ._truncation import acted
 
     tl = runs_all[runs_all["cfg_estimator.name"] == "tlssvm"]
@@ -310,9 +319,10 @@ def _truncation_claim(b: Builder, runs_all) -> list:
 
 
 def _depth_changes(k):
-    """The relative change from deep water to h/T 1.32 of the identified K', T' and of the derived truth's (per
-    model, structure, speed and parameter; on the fits that identify both depths), and those reported apart
-    (model/structure/parameter); None when the fits do not cover both depths."""
+    """The relative change from deep water to h/T 1.32 of the identified K', T' and of the
+    derived truth's (per model, structure, speed and parameter; on the fits that identify both
+    depths), and those reported apart (model/structure/parameter); None when the fits do not
+    cover both depths."""
     k = k.assign(hT=k["cfg_depth.h_T"].map(_hT))
     idx = ["cfg_model.name", "cfg_structure.name", "cfg_vessel.operation.U0", "name", "hT"]
     g = k.groupby(idx)[["estimate_nd", "truth_nd"]].median()
@@ -330,8 +340,8 @@ def _depth_changes(k):
 
 
 def _shallow_water_claim(p) -> list:
-    """Claim (c): shallow water changes K' and T' strongly, on the noise-free KCS fits by least squares that
-    identify the model."""
+    """Claim (c): shallow water changes K' and T' strongly, on the noise-free KCS fits by least
+    squares that identify the model."""
     k = p[(p["cfg_vessel.name"] == "kcs") & (p["cfg_noise.name"] == "none") & (p["cfg_estimator.name"] == "ls")
           & p["name"].isin(["K", "T", "T1"])]
     if not ("estimate_nd" in k and len(k)):

@@ -1,9 +1,9 @@
-"""Xu & Guedes Soares: the truncated LS-SVM against least squares, LS-SVM and nu-SVR where truncation can act
-as the paper intends: hull models with many collinear columns (the Abkowitz Mariner, the MMG hull of KVLCC2, the
-waterjet USV's full model), noisy records.
+"""Xu & Guedes Soares: the truncated LS-SVM against least squares, LS-SVM and nu-SVR where
+truncation can act as the paper intends: hull models with many collinear columns (the Abkowitz
+Mariner, the MMG hull of KVLCC2, the waterjet USV's full model), noisy records.
 
-``build`` writes the study's figures and tables into ``paper_figs/seed001_truncation/`` and appends its claim to
-``claims``; ``python -m study figures`` finds this module by the study's name
+``build`` writes the study's figures and tables into ``paper_figs/seed001_truncation/`` and appends
+its claim to ``claims``; ``python -m study figures`` finds this module by the study's name
 (``conf/experiment/seed001_truncation.yaml``)."""
 from __future__ import annotations
 
@@ -54,8 +54,8 @@ def build(b: Builder, runs, params, claims):
 
 
 def claim(b: Builder, p, runs_all) -> list:
-    """Decided per model and comparator over the noisy datasets where the truncation acted (both noise levels; each
-    alone is a choice), a failed fit a loss; how often it acted is said."""
+    """Decided per model and comparator over the noisy datasets where the truncation acted (both
+    noise levels; each alone is a choice), a failed fit a loss; how often it acted is said."""
     out, tabs, per = [], [], {}
     for model in sorted(p["cfg_model.name"].unique()):
         d = p[p["cfg_model.name"] == model]

@@ -1,8 +1,10 @@
-"""Du et al. (2016): the incremental LS-SVM on an AUV's integral samples, and how fast its derivatives
+"""Du et al. (2016): the incremental LS-SVM on an AUV's integral samples, and how fast its
+derivatives
 settle.
 
-``build`` writes the study's figures and tables into ``paper_figs/seed003_online_auv/`` and appends its claim (if any) to
-``claims``; ``python -m study figures`` finds this module by the study's name (``conf/experiment/seed003_online_auv.yaml``)."""
+``build`` writes the study's figures and tables into ``paper_figs/seed003_online_auv/`` and
+appends its claim (if any) to ``claims``; ``python -m study figures`` finds this module by the
+study's name (``conf/experiment/seed003_online_auv.yaml``)."""
 from __future__ import annotations
 
 import numpy as np
@@ -70,9 +72,9 @@ LIMITS = (20, SEED_SAMPLES, 40)
 
 def settling(b: Builder, run, params, rel_band: float = REL_BAND, scaled_band: float = SCALED_BAND
              ) -> pd.DataFrame | None:
-    """Per coefficient of an incremental LS-SVM run: the number of samples after which it stays inside its
-    truth-based band (NaN: never), from the run's convergence history; and after which it stays within 5 % of its
-    own final value (the criterion the estimator reports)."""
+    """Per coefficient of an incremental LS-SVM run: the number of samples after which it stays
+    inside its truth-based band (NaN: never), from the run's convergence history; and after which
+    it stays within 5 % of its own final value (the criterion the estimator reports)."""
     pr = params[params["run_id"] == run["run_id"]].set_index("name")
     rows = []
     for eq in ("X", "Y", "N"):
@@ -98,8 +100,9 @@ def settling(b: Builder, run, params, rel_band: float = REL_BAND, scaled_band: f
 
 
 def _share_verdict(k: int, n: int) -> str:
-    """Over datasets: holds when more datasets than not meet the claim beyond chance (one-sided binomial test at
-    5 %), does not hold when fewer do; one dataset (nothing drawn at random) decides by itself."""
+    """Over datasets: holds when more datasets than not meet the claim beyond chance (one-sided
+    binomial test at 5 %), does not hold when fewer do; one dataset (nothing drawn at random)
+    decides by itself."""
     from scipy import stats
 
     if n == 1:
@@ -114,13 +117,15 @@ def _share_verdict(k: int, n: int) -> str:
 
 
 def claim(b: Builder, r, p) -> list:
-    """Du et al. (2016): the incremental LS-SVM on integral samples, every derivative settled after about 20 samples.
-    A property of each dataset (every derivative inside its band after at most the limit); decided over the datasets
-    of a set-up (:func:`_share_verdict`, with the share's Wilson interval). The primary: the seed's set-up, integral
-    samples of a clean simulation (one dataset: nothing is drawn at random) at its interval scaled to this AUV, a band
-    around the truth (the seed compares with the captive-test values). Varied: the band (5, 10, 20 % of the truth;
-    1, 2, 5 % of the equation), the limit (20, 30, 40 samples), the estimator's own criterion (within 5 % of its own
-    final value), the structure, the noise (20 datasets) and the interval."""
+    """Du et al. (2016): the incremental LS-SVM on integral samples, every derivative settled
+    after about 20 samples. A property of each dataset (every derivative inside its band after at
+    most the limit); decided over the datasets of a set-up (:func:`_share_verdict`, with the
+    share's Wilson interval). The primary: the seed's set-up, integral samples of a clean
+    simulation (one dataset: nothing is drawn at random) at its interval scaled to this AUV, a
+    band around the truth (the seed compares with the captive-test values). Varied: the band (5,
+    10, 20 % of the truth; 1, 2, 5 % of the equation), the limit (20, 30, 40 samples), the
+    estimator's own criterion (within 5 % of its own final value), the structure, the noise (20
+    datasets) and the interval."""
     from statsmodels.stats.proportion import proportion_confint
 
     on = r[r["cfg_estimator.name"] == "lssvm_online"]

@@ -1,8 +1,9 @@
-"""Zheng & Xiao (2017): nonlinear KT models by differential evolution on output-error (integral) samples
-against central differences of the heading.
+"""Zheng & Xiao (2017): nonlinear KT models by differential evolution on output-error (integral)
+samples against central differences of the heading.
 
-``build`` writes the study's figures and tables into ``paper_figs/seed004_kt_de/`` and appends its claim (if any) to
-``claims``; ``python -m study figures`` finds this module by the study's name (``conf/experiment/seed004_kt_de.yaml``)."""
+``build`` writes the study's figures and tables into ``paper_figs/seed004_kt_de/`` and appends
+its claim (if any) to ``claims``; ``python -m study figures`` finds this module by the study's
+name (``conf/experiment/seed004_kt_de.yaml``)."""
 from __future__ import annotations
 
 import pandas as pd
@@ -75,11 +76,12 @@ CLAIM = ("integral (output error) samples identify the nonlinear KT parameters b
 
 
 def claim(b: Builder, r, p) -> list:
-    """Zheng & Xiao's (2017) first claim, decided per model order on the exact KT truths only (a second-order model
-    of the first-order kt1_mariner is 'degenerate', not exact; the Abkowitz Mariner's truths are a linearisation)
-    over noisy datasets at the finest sampling interval: output error on the heading against central differences,
-    one error per dataset (the median over the fit's coefficients; T1 and T2 scored without their labels, which
-    no data orders), a failed fit a loss. Parallel processing against step-by-step identification is the study
+    """Zheng & Xiao's (2017) first claim, decided per model order on the exact KT truths only (a
+    second-order model of the first-order kt1_mariner is 'degenerate', not exact; the Abkowitz
+    Mariner's truths are a linearisation) over noisy datasets at the finest sampling interval:
+    output error on the heading against central differences, one error per dataset (the median over
+    the fit's coefficients; T1 and T2 scored without their labels, which no data orders), a failed
+    fit a loss. Parallel processing against step-by-step identification is the study
     seed004_stepwise."""
     runs_all = b.all_runs if b.all_runs is not None else r
     q = label_invariant(p[p["truth_kind"] == "exact"], [("T1", "T2")])

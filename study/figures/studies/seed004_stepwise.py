@@ -1,9 +1,11 @@
-"""Zheng & Xiao (2017): parallel processing (every KT parameter at once from several records) against the step-by-step
-identification it replaces (Zou et al.: K from a small-rudder turn, alpha from a large-rudder turn, T from a
-large-rudder zigzag), by differential evolution on the heading's output error, on the same records.
+"""Zheng & Xiao (2017): parallel processing (every KT parameter at once from several records)
+against the step-by-step identification it replaces (Zou et al.: K from a small-rudder turn, alpha
+from a large-rudder turn, T from a large-rudder zigzag), by differential evolution on the heading's
+output error, on the same records.
 
-``build`` writes the study's figures and tables into ``paper_figs/seed004_stepwise/`` and appends its claim to
-``claims``; ``python -m study figures`` finds this module by the study's name (``conf/experiment/seed004_stepwise.yaml``)."""
+``build`` writes the study's figures and tables into ``paper_figs/seed004_stepwise/`` and appends
+its claim to ``claims``; ``python -m study figures`` finds this module by the study's name
+(``conf/experiment/seed004_stepwise.yaml``)."""
 from __future__ import annotations
 
 import pandas as pd
@@ -54,9 +56,10 @@ def build(b: Builder, runs, params, claims):
 
 
 def claim(b: Builder, r, p, runs_all) -> list:
-    """Decided per model order on the exact KT truths (kt1_mariner first order, kt_mariner second order) over
-    noisy datasets at the finest sampling interval; the Abkowitz Mariner (KT truths by linearisation, no exact
-    model) and the coarser interval are choices in the sensitivity table."""
+    """Decided per model order on the exact KT truths (kt1_mariner first order, kt_mariner second
+    order) over noisy datasets at the finest sampling interval; the Abkowitz Mariner (KT truths
+    by linearisation, no exact model) and the coarser interval are choices in the sensitivity
+    table."""
     out, tabs, per = [], [], {}
     exact = p[p["truth_kind"] == "exact"]
     for model in sorted(exact["cfg_model.name"].unique()):

@@ -1,7 +1,8 @@
 """The CI study: one of every figure kind the table allows, no claims (it is too small to test any).
 
-``build`` writes the study's figures and tables into ``paper_figs/smoke/`` and appends its claim (if any) to
-``claims``; ``python -m study figures`` finds this module by the study's name (``conf/experiment/smoke.yaml``)."""
+``build`` writes the study's figures and tables into ``paper_figs/smoke/`` and appends its claim
+(if any) to ``claims``; ``python -m study figures`` finds this module by the study's name
+(``conf/experiment/smoke.yaml``)."""
 from __future__ import annotations
 
 import json
@@ -18,7 +19,8 @@ SEED = None  # no seed paper's claim
 
 
 def build(b: Builder, runs, params, claims):
-    """The CI study: one of every figure kind the table allows, no claims (it is too small to test any)."""
+    """The CI study: one of every figure kind the table allows, no claims (it is too small to
+    test any)."""
     s = "smoke"
     r, p = runs[runs["cfg_study"] == s], params[params["cfg_study"] == s]
     for model in _order(r["cfg_model.name"], []):

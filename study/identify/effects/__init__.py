@@ -1,12 +1,14 @@
-"""Candidate physical effects, discovered from ``conf/effect/*.yaml`` (nothing here lists them): what
-identification with effects (``study.identify.with_effects``) adds to a model, and the model doctor's candidates.
+"""Candidate physical effects, discovered from ``conf/effect/*.yaml`` (nothing here lists them):
+what identification with effects (``study.identify.with_effects``) adds to a model, and the model
+doctor's candidates.
 
-An effect config names its class (``_target_``), its nonlinear parameters and options; the contract is in
-:mod:`.base`. Adding an effect is one class plus one YAML, like an estimator. A user adds their own without
-touching the package: a YAML in a folder of their own, named by ``effect_path=<dir>`` (``python -m
-study diagnose``) or the environment variable ``STUDY_EFFECT_PATH`` (folders separated by ``:``), whose
-``_target_`` is a class importable from their ``PYTHONPATH`` and defined in a module of one of those folders (an
-effect folder is code, and must be trusted: a ``_target_`` elsewhere is refused before anything is imported,
+An effect config names its class (``_target_``), its nonlinear parameters and options; the contract
+is in :mod:`.base`. Adding an effect is one class plus one YAML, like an estimator. A user adds
+their own without touching the package: a YAML in a folder of their own, named by
+``effect_path=<dir>`` (``python -m study diagnose``) or the environment variable
+``STUDY_EFFECT_PATH`` (folders separated by ``:``), whose ``_target_`` is a class importable from
+their ``PYTHONPATH`` and defined in a module of one of those folders (an effect folder is code, and
+must be trusted: a ``_target_`` elsewhere is refused before anything is imported,
 ``study.configuration.compose.check_target``); or a config dict given directly as a candidate.
 """
 from __future__ import annotations
@@ -23,8 +25,9 @@ __all__ = ["Effect", "Param", "RecordInfo", "effect_dirs", "list_effects", "make
 
 
 def effect_dirs(extra=()) -> list:
-    """The folders effect YAMLs are read from: the package's ``conf/effect``, then ``STUDY_EFFECT_PATH``, then
-    ``extra`` (a later folder's YAML of the same name replaces an earlier one)."""
+    """The folders effect YAMLs are read from: the package's ``conf/effect``, then
+    ``STUDY_EFFECT_PATH``, then ``extra`` (a later folder's YAML of the same name replaces an
+    earlier one)."""
     from study.configuration.compose import CONF_DIR
 
     dirs = [CONF_DIR / "effect"]
@@ -113,7 +116,8 @@ def registry(names, extra=()) -> dict:
 
 
 def describe_values(effects: dict, by_effect: dict) -> dict:
-    """Every effect's estimates in the user's terms, merged (``by_effect``: name -> its own values)."""
+    """Every effect's estimates in the user's terms, merged (``by_effect``: name -> its own
+    values)."""
     out = {}
     for name, vals in by_effect.items():
         out.update(effects[name].describe(vals) if name in effects else vals)

@@ -1,5 +1,5 @@
-"""The contract every candidate effect follows (discovered from ``conf/effect/*.yaml``): what identification with
-effects adds to a model, and the model doctor's candidates.
+"""The contract every candidate effect follows (discovered from ``conf/effect/*.yaml``): what
+identification with effects adds to a model, and the model doctor's candidates.
 
 An effect is one class (normally one module in this package, or anywhere importable) and one YAML::
 
@@ -10,25 +10,28 @@ An effect is one class (normally one module in this package, or anywhere importa
     example: {...}        # a hidden-effect case the generated tests run (tests/doctor/test_doctor_effects.py)
 
 A model is identified with effects by equation error with variable projection
-(``study.identify.with_effects``): for given values of the effects' nonlinear parameters the regression rows are
-built and every linear unknown (free model coefficients and the effects' linear parameters) follows by least
-squares. An effect says, through the
-hooks below, what it estimates and how it enters
+(``study.identify.with_effects``): for given values of the effects' nonlinear parameters the
+regression rows are built and every linear unknown (free model coefficients and the effects' linear
+parameters) follows by least squares. An effect says, through the hooks below, what it estimates and
+how it enters
 
-- the **rows** ``M (a_measured - a_known) = sum_i theta_i phi_i`` (forces, per equation X, Y, N): it may change
-  the measured columns (``transform``: e.g. water-relative velocities), add a known force (``known_forces``),
-  add linear unknowns with their force per unit (``linear_forces``), or free vessel parameters that enter the
-  kind's own equations linearly (``free_coefficients``: their columns come from the compiled equations);
-- the **simulation** (the rows' known part and the replay through a record): effects of the truth simulator
-  applied when the vessel is built (``sim_effects``: shallow water), packed vessel parameters set
-  (``vessel_changes``: current, wind, steering gear), a constant body force during a replay (``replay_force``),
-  the replay's initial state (``initial_state``), and whether the record's rudder is a command
+- the **rows** ``M (a_measured - a_known) = sum_i theta_i phi_i`` (forces, per equation X, Y, N): it
+  may change the measured columns (``transform``: e.g. water-relative velocities), add a known force
+  (``known_forces``), add linear unknowns with their force per unit (``linear_forces``), or free
+  vessel parameters that enter the kind's own equations linearly (``free_coefficients``: their
+  columns come from the compiled equations);
+- the **simulation** (the rows' known part and the replay through a record): effects of the truth
+  simulator applied when the vessel is built (``sim_effects``: shallow water), packed vessel
+  parameters set (``vessel_changes``: current, wind, steering gear), a constant body force during a
+  replay (``replay_force``), the replay's initial state (``initial_state``), and whether the
+  record's rudder is a command
   (``rudder_is_command``).
 
-Every hook gets the :class:`study.identify.with_effects.EffectsProblem` (vessel, scale, records), the parameter
-``values`` (nonlinear parameters, the chosen variant, and in the replay also the linear unknowns) and, where it
-depends on the record, a :class:`RecordInfo` (its data, its water depth). Forces are in N (N m for yaw), body axes,
-each an ``(n, 3)`` array of X, Y, N at the structure's nodes.
+Every hook gets the :class:`study.identify.with_effects.EffectsProblem` (vessel, scale, records),
+the parameter ``values`` (nonlinear parameters, the chosen variant, and in the replay also the
+linear unknowns) and, where it depends on the record, a :class:`RecordInfo` (its data, its water
+depth). Forces are in N (N m for yaw), body axes, each an ``(n, 3)`` array of X, Y, N at the
+structure's nodes.
 """
 from __future__ import annotations
 
@@ -40,8 +43,8 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Param:
-    """A nonlinear (outer) parameter: bounds and start grid in units of ``scale`` (``1``: as given; ``U0``: the
-    vessel's service speed; ``T``: the ship's time scale L/U0, at least 5 s)."""
+    """A nonlinear (outer) parameter: bounds and start grid in units of ``scale`` (``1``: as
+    given; ``U0``: the vessel's service speed; ``T``: the ship's time scale L/U0, at least 5 s)."""
 
     name: str
     unit: str
@@ -67,8 +70,8 @@ class Param:
 
 @dataclass
 class RecordInfo:
-    """What an effect may need of one record: its index among the problem's records, its data (DataFrame), its
-    name, and its water depth as h/T (None: not measured)."""
+    """What an effect may need of one record: its index among the problem's records, its data
+    (DataFrame), its name, and its water depth as h/T (None: not measured)."""
 
     index: int
     data: object
@@ -78,15 +81,17 @@ class RecordInfo:
 
 
 class Effect:
-    """Base class: a candidate effect with nothing to estimate. Subclasses override the hooks they need.
+    """Base class: a candidate effect with nothing to estimate. Subclasses override the hooks they
+    need.
 
-    Class attributes (shown in the report's catalogue): ``physics``, ``enters``, ``source``; and where the effect
-    can be (``study.records.facility``): ``needs``, what must exist where the records were measured (``"wind"``,
-    ``"current"``: no wind candidate indoors, no current in still water), and ``setup_effect``, True when the
-    effect belongs to the test set-up rather than to the ship (a rudder zero offset, a yaw bias): it is then left
-    out of predictions for another facility or scale unless the user keeps it. An effect's YAML may set both
-    (``needs: [wind]``, ``setup_effect: true``); the YAML's value wins.
-    ``params`` (instance): the nonlinear parameters, from the YAML (or the class's ``default_params``).
+    Class attributes (shown in the report's catalogue): ``physics``, ``enters``, ``source``; and
+    where the effect can be (``study.records.facility``): ``needs``, what must exist where the
+    records were measured (``"wind"``, ``"current"``: no wind candidate indoors, no current in still
+    water), and ``setup_effect``, True when the effect belongs to the test set-up rather than to the
+    ship (a rudder zero offset, a yaw bias): it is then left out of predictions for another facility
+    or scale unless the user keeps it. An effect's YAML may set both (``needs: [wind]``,
+    ``setup_effect: true``); the YAML's value wins. ``params`` (instance): the nonlinear parameters,
+    from the YAML (or the class's ``default_params``).
     """
 
     physics: str = ""
@@ -104,7 +109,8 @@ class Effect:
 
     # -------------------------------------------------------------------------------- what it estimates
     def applies(self, problem) -> str | None:
-        """None when the effect can act on this problem, else the reason it cannot (shown in the report)."""
+        """None when the effect can act on this problem, else the reason it cannot (shown in the
+        report)."""
         return None
 
     def outer(self, problem) -> list:
@@ -112,12 +118,13 @@ class Effect:
         return [(p.name,) + p.bounds(problem.U0, problem.L) for p in self.params]
 
     def variants(self, problem) -> list:
-        """Discrete alternatives, each a dict merged into ``values``; the fit keeps the one with the lowest
-        training error (e.g. shallow water's published formulas)."""
+        """Discrete alternatives, each a dict merged into ``values``; the fit keeps the one with
+        the lowest training error (e.g. shallow water's published formulas)."""
         return [{}]
 
     def free_coefficients(self, problem) -> dict:
-        """Vessel parameters this effect frees (they enter the kind's equations linearly): name -> equation."""
+        """Vessel parameters this effect frees (they enter the kind's equations linearly): name
+        -> equation."""
         return {}
 
     def linear(self, problem) -> dict:
@@ -126,8 +133,8 @@ class Effect:
 
     # ------------------------------------------------------------------------------------------- rows
     def transform(self, problem, t, data: dict, values: dict, vessel, info: RecordInfo) -> list:
-        """Change the measured columns of a segment (``data``, in place; ``t`` its times) before the rows are
-        built; return the names of the columns changed."""
+        """Change the measured columns of a segment (``data``, in place; ``t`` its times) before
+        the rows are built; return the names of the columns changed."""
         return []
 
     def known_forces(self, problem, nodes: dict, values: dict, vessel, info: RecordInfo):
@@ -140,7 +147,8 @@ class Effect:
 
     # ------------------------------------------------------------------------------------- simulation
     def sim_effects(self, problem, values: dict, info: RecordInfo | None) -> list:
-        """Effects of the truth simulator (``study.sim.effects``) applied when the vessel is built."""
+        """Effects of the truth simulator (``study.sim.effects``) applied when the vessel is
+        built."""
         return []
 
     def vessel_changes(self, problem, values: dict, info: RecordInfo | None) -> dict:
@@ -148,18 +156,20 @@ class Effect:
         return {}
 
     def replay_force(self, problem, values: dict, info: RecordInfo | None) -> tuple:
-        """A constant body-fixed force (X [N], Y [N], N [N m]) during a replay (the integrator's ext_X/Y/N)."""
+        """A constant body-fixed force (X [N], Y [N], N [N m]) during a replay (the integrator's
+        ext_X/Y/N)."""
         return (0.0, 0.0, 0.0)
 
     def initial_state(self, problem, values: dict, state: dict) -> None:
-        """Change the replay's initial state (``u, v`` water-relative, ``r``, ``x0``, ``y0``, ``psi``) in place."""
+        """Change the replay's initial state (``u, v`` water-relative, ``r``, ``x0``, ``y0``,
+        ``psi``) in place."""
 
     rudder_is_command: bool = False  # the record's rudder column is the command, the steering gear acts on it
 
     # ----------------------------------------------------------------------------------------- report
     def describe(self, values: dict) -> dict:
-        """The effect's estimates (``values``: its own parameters, variant and linear unknowns) in a user's
-        terms; default: as they are."""
+        """The effect's estimates (``values``: its own parameters, variant and linear unknowns)
+        in a user's terms; default: as they are."""
         return dict(values)
 
     def units(self, problem=None) -> dict:
@@ -176,7 +186,8 @@ class Effect:
 
 
 def unit_forces(problem, n: int, eq: str) -> np.ndarray:
-    """(n, 3) of the non-dimensional unit force in ``eq`` (0.5 rho L d U0^2, times L for N): the MMG scale."""
+    """(n, 3) of the non-dimensional unit force in ``eq`` (0.5 rho L d U0^2, times L for N): the
+    MMG scale."""
     out = np.zeros((n, 3))
     k = "XYN".index(eq)
     out[:, k] = problem.scale[k]

@@ -1,8 +1,9 @@
 """A uniform, irrotational current: the hull feels water-relative velocities, the track drifts.
 
-Fossen, T.I. (2011) Handbook of Marine Craft Hydrodynamics and Motion Control, Sec. 10.3 (Property 8.1 makes
-the equations of motion in relative velocity exact for a constant irrotational current). The rows take the
-record's u, v (over ground) minus the current in body axes; the replay starts from the water-relative state.
+Fossen, T.I. (2011) Handbook of Marine Craft Hydrodynamics and Motion Control, Sec. 10.3 (Property
+8.1 makes the equations of motion in relative velocity exact for a constant irrotational current).
+The rows take the record's u, v (over ground) minus the current in body axes; the replay starts from
+the water-relative state.
 """
 from __future__ import annotations
 

@@ -1,10 +1,10 @@
 """Higher-order hull terms the model lacks or has wrong: they become free coefficients.
 
-What is freed: the terms the model omits (``omit`` in its config), else the kind's nonlinear hull terms
-(``options.terms`` in ``conf/effect/hull_nonlinear.yaml``, per kind and equation) that the model does not
-already identify. Their columns come from the kind's own compiled equations (linear in each coefficient).
-Sources of the term lists: Yasukawa & Yoshimura (2015) eqs. 9-11 (mmg); Song et al. (2025) eq. 2 (waterjet); Fossen's
-mariner.m (abkowitz); Du et al. (2016) eq. 3 (auv).
+What is freed: the terms the model omits (``omit`` in its config), else the kind's nonlinear hull
+terms (``options.terms`` in ``conf/effect/hull_nonlinear.yaml``, per kind and equation) that the
+model does not already identify. Their columns come from the kind's own compiled equations (linear
+in each coefficient). Sources of the term lists: Yasukawa & Yoshimura (2015) eqs. 9-11 (mmg); Song
+et al. (2025) eq. 2 (waterjet); Fossen's mariner.m (abkowitz); Du et al. (2016) eq. 3 (auv).
 """
 from __future__ import annotations
 

@@ -1,21 +1,23 @@
-"""The propeller of an MMG vessel identified from the records' measured thrust: the wake fraction w_P0 by least
-squares on the thrust, the thrust deduction t_P then from the surge equation.
+"""The propeller of an MMG vessel identified from the records' measured thrust: the wake fraction
+w_P0 by least squares on the thrust, the thrust deduction t_P then from the surge equation.
 
-MMG propeller (Yasukawa & Yoshimura 2015, eqs. 13-16): T = rho n^2 D_P^4 K_T(J_P), K_T = k0 + k1 J_P + k2 J_P^2,
-J_P = u (1 - w_P) / (n D_P), 1 - w_P = (1 - w_P0) (1 + (1 - exp(-C1 |beta_P|)) (C2 - 1)), beta_P = beta - x'_P r'.
-With the thrust measured (a column ``thrust`` [N] in every training record, as HSVA's free-running KVLCC2
-records have), w_P0 is what makes the vessel's propeller (its D_P, K_T polynomial, C1, C2) give the measured
-thrust at the measured u, v, r and n: a one-parameter least-squares fit over every sample with the propeller
-running, before any force is identified (the thrust identity of ITTC 7.5-02-03-01.4, applied sample by sample).
-It is then held, and t_P is a free coefficient of the surge equation (X_P = (1 - t_P) T, linear in t_P). This
-is the propeller model Alexandersson, Mao & Ringsberg (2022, Ocean Eng 266, 112940) regressed on HSVA's
-measured thrust, reduced to its wake fraction.
+MMG propeller (Yasukawa & Yoshimura 2015, eqs. 13-16): T = rho n^2 D_P^4 K_T(J_P), K_T = k0 + k1 J_P
++ k2 J_P^2, J_P = u (1 - w_P) / (n D_P), 1 - w_P = (1 - w_P0) (1 + (1 - exp(-C1 |beta_P|)) (C2 -
+1)), beta_P = beta - x'_P r'. With the thrust measured (a column ``thrust`` [N] in every training
+record, as HSVA's free-running KVLCC2 records have), w_P0 is what makes the vessel's propeller (its
+D_P, K_T polynomial, C1, C2) give the measured thrust at the measured u, v, r and n: a one-parameter
+least-squares fit over every sample with the propeller running, before any force is identified (the
+thrust identity of ITTC 7.5-02-03-01.4, applied sample by sample). It is then held, and t_P is a
+free coefficient of the surge equation (X_P = (1 - t_P) T, linear in t_P). This is the propeller
+model Alexandersson, Mao & Ringsberg (2022, Ocean Eng 266, 112940) regressed on HSVA's measured
+thrust, reduced to its wake fraction.
 
-What is not identified, and why: the K_T polynomial's own coefficients. With the propeller at one speed (HSVA's
-runs: 10.23 rps throughout) J_P spans a narrow range, and k1, k2 are confounded with w_P0 (K_T depends on
-(1 - w_P0) J only through k1 (1 - w_P0) and k2 (1 - w_P0)^2): the polynomial is the vessel's (its open-water
-curve) and w_P0 absorbs the rest. Assumption labelled: the measured thrust is the propeller's (not the shaft's
-with the rudder's reaction), and the records' ``n`` is the propeller's speed in rps.
+What is not identified, and why: the K_T polynomial's own coefficients. With the propeller at one
+speed (HSVA's runs: 10.23 rps throughout) J_P spans a narrow range, and k1, k2 are confounded with
+w_P0 (K_T depends on (1 - w_P0) J only through k1 (1 - w_P0) and k2 (1 - w_P0)^2): the polynomial is
+the vessel's (its open-water curve) and w_P0 absorbs the rest. Assumption labelled: the measured
+thrust is the propeller's (not the shaft's with the rudder's reaction), and the records' ``n`` is
+the propeller's speed in rps.
 """
 from __future__ import annotations
 
@@ -28,7 +30,8 @@ from .base import Effect
 
 
 def model_thrust(problem, df, wP0: float) -> np.ndarray:
-    """The vessel's propeller thrust [N] at a record's u, v, r, n for wake fraction ``wP0`` (eqs. 13-16)."""
+    """The vessel's propeller thrust [N] at a record's u, v, r, n for wake fraction ``wP0`` (eqs.
+    13-16)."""
     p = problem.base_param
     rho, L, D = p("rho"), p("L"), p("DP")
     u, v, r, n = (df[c].to_numpy(float) for c in ("u", "v", "r", "n"))
@@ -64,8 +67,8 @@ class PropellerThrust(Effect):
         return None
 
     def thrust_fit(self, problem) -> dict:
-        """w_P0 by least squares on the measured thrust of the training records (cached on the problem), with the
-        thrust's RMS error at the vessel's w_P0 and at the fitted one."""
+        """w_P0 by least squares on the measured thrust of the training records (cached on the
+        problem), with the thrust's RMS error at the vessel's w_P0 and at the fitted one."""
         cache = getattr(problem, "_thrust_fit", None)
         if cache is not None:
             return cache

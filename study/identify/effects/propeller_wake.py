@@ -1,11 +1,12 @@
 """Propeller-hull interaction of an MMG vessel: the wake fraction w_P0 and the thrust deduction t_P.
 
-MMG propeller (Yasukawa & Yoshimura 2015, eqs. 12-16): X_P = (1 - t_P) rho n^2 D_P^4 K_T(J_P), J_P from
-u (1 - w_P); w_P also sets the rudder's inflow (eqs. 21-24). t_P enters linearly (a free coefficient);
-w_P0 does not (a nonlinear parameter, searched within 0.3 of the vessel's value). When every training record
-measures the propeller thrust, w_P0 is not searched here: the thrust sets it (``propeller_thrust``), and a w_P0
-searched to fit the motions alone may contradict the thrust measured (on HSVA's KVLCC2 records: 0.24 searched,
-0.43 from the thrust with the vessel's propeller).
+MMG propeller (Yasukawa & Yoshimura 2015, eqs. 12-16): X_P = (1 - t_P) rho n^2 D_P^4 K_T(J_P), J_P
+from u (1 - w_P); w_P also sets the rudder's inflow (eqs. 21-24). t_P enters linearly (a free
+coefficient); w_P0 does not (a nonlinear parameter, searched within 0.3 of the vessel's value). When
+every training record measures the propeller thrust, w_P0 is not searched here: the thrust sets it
+(``propeller_thrust``), and a w_P0 searched to fit the motions alone may contradict the thrust
+measured (on HSVA's KVLCC2 records: 0.24 searched, 0.43 from the thrust with the vessel's
+propeller).
 """
 from __future__ import annotations
 

@@ -1,8 +1,9 @@
 """A slow or late steering gear: first-order lag and dead time between the command and the rudder.
 
-IMO MSC.137(76) (steering gear); ITTC 7.5-04-02-01 asks for the actual rudder angle to be recorded because it
-is not the command. With this effect the record's rudder column is taken as the COMMAND: the rows use the
-angle the vessel's steering gear (rate limit, lag, dead time: the integrator's own actuator) makes of it.
+IMO MSC.137(76) (steering gear); ITTC 7.5-04-02-01 asks for the actual rudder angle to be recorded
+because it is not the command. With this effect the record's rudder column is taken as the COMMAND:
+the rows use the angle the vessel's steering gear (rate limit, lag, dead time: the integrator's own
+actuator) makes of it.
 """
 from __future__ import annotations
 

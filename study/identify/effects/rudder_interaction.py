@@ -1,10 +1,11 @@
 """Hull-rudder interaction of an MMG vessel, freed: t_R (surge), a_H (sway and yaw) and x_R (yaw).
 
-MMG rudder forces (Yasukawa & Yoshimura 2015, eqs. 17-25): X_R = -(1 - t_R) F_N sin delta,
-Y_R = -(1 + a_H) F_N cos delta, N_R = -(x_R + a_H x_H) F_N cos delta. Each of t_R, a_H, x_R enters linearly,
-so they are free coefficients read off the compiled equations. This is what real free-running data point to
-when the yaw residual grows with the rudder angle while the sway residual falls with it (HSVA's KVLCC2
-records): the rudder force is shared between sway and yaw differently from the model's.
+MMG rudder forces (Yasukawa & Yoshimura 2015, eqs. 17-25): X_R = -(1 - t_R) F_N sin delta, Y_R = -(1
++ a_H) F_N cos delta, N_R = -(x_R + a_H x_H) F_N cos delta. Each of t_R, a_H, x_R enters linearly,
+so they are free coefficients read off the compiled equations. This is what real free-running data
+point to when the yaw residual grows with the rudder angle while the sway residual falls with it
+(HSVA's KVLCC2 records): the rudder force is shared between sway and yaw differently from the
+model's.
 """
 from __future__ import annotations
 

@@ -1,18 +1,20 @@
 """Finite water depth: larger hull derivatives, wake, thrust deduction and flow straightening.
 
-The truth simulator's own corrections (``study.sim.effects.ShallowWater``): the linear hull derivatives by one
-of the published formulas (``options.formulas``: Kijima et al. 1990; Ankudinov et al. as ported in ShipYard),
-and for MMG vessels R'0, X'vv, X'vr, N'vvr, N'vrr, 1-t_P, 1-w_P and gamma_R (Furukawa et al. 2016; Tang et al.
-2020). The formula, and whether the MMG interaction factors apply (a model of the same physics may correct the
-hull derivatives only), are chosen by the data (the lowest training error).
+The truth simulator's own corrections (``study.sim.effects.ShallowWater``): the linear hull
+derivatives by one of the published formulas (``options.formulas``: Kijima et al. 1990; Ankudinov et
+al. as ported in ShipYard), and for MMG vessels R'0, X'vv, X'vr, N'vvr, N'vrr, 1-t_P, 1-w_P and
+gamma_R (Furukawa et al. 2016; Tang et al. 2020). The formula, and whether the MMG interaction
+factors apply (a model of the same physics may correct the hull derivatives only), are chosen by the
+data (the lowest training error).
 
-Depth per record: a record's water depth (its ``depth`` column [m], or ``depth`` in its metadata: metres, or
-``{h_T: ...}``) gives its own h/T = depth / draft, in the fit and in the replay, so a validation record at a
-depth no training record had is predicted at its own depth. When a training record has no depth, one h/T common
-to the records without one is a nonlinear parameter; with depths measured, one factor on every record's
-under-keel clearance h/T - 1 (``clearance_scale``, 1 = the formula as published) is, so that corrections of
-another strength than the formulas' are still matched. Free model coefficients are identified as their
-deep-water values: each record's column is scaled by the formula's factor at its depth.
+Depth per record: a record's water depth (its ``depth`` column [m], or ``depth`` in its metadata:
+metres, or ``{h_T: ...}``) gives its own h/T = depth / draft, in the fit and in the replay, so a
+validation record at a depth no training record had is predicted at its own depth. When a training
+record has no depth, one h/T common to the records without one is a nonlinear parameter; with depths
+measured, one factor on every record's under-keel clearance h/T - 1 (``clearance_scale``, 1 = the
+formula as published) is, so that corrections of another strength than the formulas' are still
+matched. Free model coefficients are identified as their deep-water values: each record's column is
+scaled by the formula's factor at its depth.
 """
 from __future__ import annotations
 

@@ -1,10 +1,11 @@
-"""Steady true wind on the superstructure, Fossen's (2011, Sec. 8.1) coefficients and the vessel's windage.
+"""Steady true wind on the superstructure, Fossen's (2011, Sec. 8.1) coefficients and the vessel's
+windage.
 
 C_X = -c_x cos g, C_Y = c_y sin g, C_N = c_n sin 2g (g: apparent wind angle of attack): the compiled
-integrator's own function (``study.sim.wind_forces``) gives a known force once the wind is known. Without wind
-measurements the true wind's north and east components are the nonlinear parameters; with measured true wind in
-the records (``wind_speed``, ``wind_dir``) the wind is known and one factor per equation on its force (on c_x,
-c_y, c_n) is a linear unknown instead.
+integrator's own function (``study.sim.wind_forces``) gives a known force once the wind is known.
+Without wind measurements the true wind's north and east components are the nonlinear parameters;
+with measured true wind in the records (``wind_speed``, ``wind_dir``) the wind is known and one
+factor per equation on its force (on c_x, c_y, c_n) is a linear unknown instead.
 """
 from __future__ import annotations
 

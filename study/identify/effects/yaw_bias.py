@@ -1,7 +1,8 @@
 """A constant side force and yaw moment: propeller walk, a rudder zero offset, hull asymmetry.
 
-Non-dimensional as the MMG coefficients (Y' = Y / (0.5 rho L d U0^2), N' = N / (0.5 rho L^2 d U0^2)), so one
-value means the same on any vessel. Assumption (labelled): independent of speed within a record.
+Non-dimensional as the MMG coefficients (Y' = Y / (0.5 rho L d U0^2), N' = N / (0.5 rho L^2 d
+U0^2)), so one value means the same on any vessel. Assumption (labelled): independent of speed
+within a record.
 """
 from __future__ import annotations
 

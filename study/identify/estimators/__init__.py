@@ -6,8 +6,8 @@ An estimator config names its class and hyper-parameters::
     _target_: study.identify.estimators.linear.Ridge   # any importable class following base.Estimator
     params: {alphas: [1.0e-6, 1.0e+6, 61]}
 
-Adding an estimator is one class (anywhere importable, normally one module here) plus one YAML; the test
-suite and the app pick it up from the config folder. The contract is in :mod:`.base`.
+Adding an estimator is one class (anywhere importable, normally one module here) plus one YAML; the
+test suite and the app pick it up from the config folder. The contract is in :mod:`.base`.
 """
 from __future__ import annotations
 
@@ -44,7 +44,8 @@ def estimator_class(cfg: dict):
 
 
 def make_estimator(cfg, **overrides) -> Estimator:
-    """An estimator from its config (dict or config name), hyper-parameters from ``params`` + overrides."""
+    """An estimator from its config (dict or config name), hyper-parameters from ``params`` +
+    overrides."""
     if isinstance(cfg, str):
         from study.configuration.compose import read_config
 

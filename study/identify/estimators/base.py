@@ -1,8 +1,10 @@
-"""The contract every estimator follows (scikit-learn style; see ``study/identify/estimators/__init__.py``).
+"""The contract every estimator follows (scikit-learn style; see
+``study/identify/estimators/__init__.py``).
 
-- ``__init__`` only stores hyper-parameters (``get_params`` / ``clone`` round-trip); nothing data-dependent.
-- ``fit(X, y)`` (regression: ``y = X theta + e``, no intercept in the model) learns and returns ``self``.
-  ``X`` is an (n, k) array or a DataFrame whose column names are the parameter names.
+- ``__init__`` only stores hyper-parameters (``get_params`` / ``clone`` round-trip); nothing
+  data-dependent.
+- ``fit(X, y)`` (regression: ``y = X theta + e``, no intercept in the model) learns and returns
+  ``self``. ``X`` is an (n, k) array or a DataFrame whose column names are the parameter names.
 - ``fit_output_error(problem)`` (only estimators that simulate): ``problem`` is a
   :class:`study.identify.output_error.OutputErrorProblem`; learns the same attributes.
 - ``fit_effects(problem, effects)`` (only estimators of models with effects): ``problem`` is a
@@ -19,43 +21,46 @@ Learned attributes (trailing underscore):
 ``samples_`` (m, k) — optional
     draws from a posterior (emcee); the model turns them into intervals of derived parameters.
 ``prior_mean_``, ``prior_sd_``, ``identifiability_`` (k,) — optional
-    an estimator under a prior (``fit(X, y, prior={column: (mean, sd)})``): the prior and the ratio of posterior
-    to prior standard deviation (near 0: the records determine the coefficient; near 1: the prior does).
+    an estimator under a prior (``fit(X, y, prior={column: (mean, sd)})``): the prior and the ratio
+    of posterior to prior standard deviation (near 0: the records determine the coefficient; near 1:
+    the prior does).
 ``selected_`` (k,) bool — optional
     terms kept by a selecting estimator (lasso, sindy).
 ``diagnostics_`` dict
     scalar figures worth a column in the results table (regularisation chosen, rank, acceptance...).
 ``artefacts_`` dict
-    name -> ``pandas.DataFrame`` (saved as CSV) or ``bytes`` (saved as is): curves and chains that the figures
-    are rebuilt from (L-curve, online convergence, emcee chain).
+    name -> ``pandas.DataFrame`` (saved as CSV) or ``bytes`` (saved as is): curves and chains that
+    the figures are rebuilt from (L-curve, online convergence, emcee chain).
 
 Class attributes declare what an estimator can do (the base class gives every default):
 
 ``problem_types``
-    subset of ``{"regression", "output_error", "effects"}``; ``fit_output_error`` exists for the second,
-    ``fit_effects(problem, effects)`` for the third (a force model with ``model.effects``: an
-    ``study.identify.with_effects.EffectsProblem`` whose rows change with the effects' nonlinear parameters;
+    subset of ``{"regression", "output_error", "effects"}``; ``fit_output_error`` exists for the
+    second, ``fit_effects(problem, effects)`` for the third (a force model with ``model.effects``:
+    an ``study.identify.with_effects.EffectsProblem`` whose rows change with the effects' nonlinear
+    parameters;
     ``study.identify.with_effects.estimator.VariableProjection``).
 ``accepts_prior``
     ``fit`` takes ``prior={column: (mean, sd)}``.
 ``models_row_noise``
     ``fit`` takes ``noise_operators`` (``study.identify.row_noise.RowOperators``) and ``row_errors``
-    (``study.identify.row_errors.RowErrors``), and sets ``row_noise_`` (the fitted noise model or None). Whether
-    one instance wants them (its likelihood) is :attr:`Estimator.uses_noise_operators` and
+    (``study.identify.row_errors.RowErrors``), and sets ``row_noise_`` (the fitted noise model or
+    None). Whether one instance wants them (its likelihood) is
+    :attr:`Estimator.uses_noise_operators` and
     :attr:`Estimator.uses_row_errors`.
 ``checks_omitted_terms``
-    ``fit`` takes ``neighbours``: columns of terms the model lacks, on the same rows (its trust verdict tests the
-    model against them, ``study.identify.trust.omitted_terms``).
+    ``fit`` takes ``neighbours``: columns of terms the model lacks, on the same rows (its trust
+    verdict tests the model against them, ``study.identify.trust.omitted_terms``).
 ``reports_progress``
     ``fit`` (and ``fit_output_error``) take ``progress``.
 
 The engine (``study.identify.fit``) calls one method, :meth:`Estimator.fit_problem`, with a
 :class:`.problem.RegressionProblem`, an output-error problem or a model with effects (each names its
-``problem_type``); it checks the problem once and hands ``fit`` only
-what the declarations say. A contract test checks each declaration against the signatures. ``skip(model,
-structure)`` returns ``(True, reason)`` for a pairing that makes no sense (benchopt's skip hook); the run is then
-recorded as 'skipped' with the reason, never raised. ``trust_verdict`` judges a regression run's intervals (None:
-the estimator gives no verdict).
+``problem_type``); it checks the problem once and hands ``fit`` only what the declarations say. A
+contract test checks each declaration against the signatures. ``skip(model, structure)`` returns
+``(True, reason)`` for a pairing that makes no sense (benchopt's skip hook); the run is then
+recorded as 'skipped' with the reason, never raised. ``trust_verdict`` judges a regression run's
+intervals (None: the estimator gives no verdict).
 """
 from __future__ import annotations
 
@@ -68,8 +73,9 @@ _NO_TARGET = object()  # as_arrays(X) for predict: no target asked for (None pas
 
 
 def as_arrays(X, y=_NO_TARGET):
-    """(X as float array, y as float array or None, column names) from arrays or a DataFrame, refused with
-    scikit-learn's messages where its conventions name one (sparse, complex, empty, missing or 2-D targets)."""
+    """(X as float array, y as float array or None, column names) from arrays or a DataFrame,
+    refused with scikit-learn's messages where its conventions name one (sparse, complex, empty,
+    missing or 2-D targets)."""
     if hasattr(X, "tocsr") or hasattr(X, "toarray"):
         raise TypeError("sparse input is not supported: expected a dense 2-D array of regressors (X.toarray())")
     names = [str(c) for c in X.columns] if hasattr(X, "columns") else None
@@ -112,10 +118,11 @@ def as_arrays(X, y=_NO_TARGET):
 class Estimator:
     """Base class: capabilities, the skip hook, and ``predict``. Subclasses implement ``fit``.
 
-    scikit-learn's parameter protocol (``get_params``/``set_params``, so that ``sklearn.base.clone`` works) and
-    ``score`` are scikit-learn's own (``BaseEstimator``, ``RegressorMixin``), called on first use rather than
-    inherited: importing scikit-learn costs about 1 s of CPU (it imports scipy.stats), which every fresh worker
-    would pay before its first run; runs by ls, lssvm, the SVR QPs, DE and emcee never need it."""
+    scikit-learn's parameter protocol (``get_params``/``set_params``, so that
+    ``sklearn.base.clone`` works) and ``score`` are scikit-learn's own (``BaseEstimator``,
+    ``RegressorMixin``), called on first use rather than inherited: importing scikit-learn costs
+    about 1 s of CPU (it imports scipy.stats), which every fresh worker would pay before its
+    first run; runs by ls, lssvm, the SVR QPs, DE and emcee never need it."""
 
     @classmethod
     def _get_param_names(cls):
@@ -142,8 +149,9 @@ class Estimator:
     _estimator_type: ClassVar[str] = "regressor"
 
     def __sklearn_tags__(self):
-        """scikit-learn's tags (1.6 and later: ``is_regressor``, ``cross_val_score`` and ``check_estimator`` ask for
-        them): a regressor of a dense, finite, 2-D ``X`` and a 1-D ``y``, as :func:`as_arrays` requires."""
+        """scikit-learn's tags (1.6 and later: ``is_regressor``, ``cross_val_score`` and
+        ``check_estimator`` ask for them): a regressor of a dense, finite, 2-D ``X`` and a 1-D
+        ``y``, as :func:`as_arrays` requires."""
         from sklearn.utils import InputTags, RegressorTags, Tags, TargetTags
 
         return Tags(estimator_type="regressor", target_tags=TargetTags(required=True, single_output=True),
@@ -165,26 +173,31 @@ class Estimator:
 
     @property
     def uses_noise_operators(self) -> bool:
-        """Whether this instance's ``fit`` wants the structure's noise operators (``models_row_noise`` only)."""
+        """Whether this instance's ``fit`` wants the structure's noise operators
+        (``models_row_noise`` only)."""
         return False
 
     @property
     def uses_row_errors(self) -> bool:
-        """Whether this instance's ``fit`` wants the rows' errors removed (``models_row_noise`` only)."""
+        """Whether this instance's ``fit`` wants the rows' errors removed (``models_row_noise``
+        only)."""
         return False
 
     @property
     def row_error_probes(self) -> int | None:
-        """Noisy copies of the records the regressors' noise is measured with (None: the engine's default)."""
+        """Noisy copies of the records the regressors' noise is measured with (None: the engine's
+        default)."""
         return None
 
     def fit_problem(self, problem, progress: bool = False):
         """Fit a problem of one of the ``problem_types`` (its ``problem_type``): a
-        :class:`.problem.RegressionProblem`, an output-error problem or a model with effects: the engine's one
+        :class:`.problem.RegressionProblem`, an output-error problem or a model with effects: the
+        engine's one
         entry.
 
-        The problem is checked against the declared capabilities, then ``fit`` (``fit_output_error``,
-        ``fit_effects``) gets the rows and what the estimator declares it takes. Returns ``self``."""
+        The problem is checked against the declared capabilities, then ``fit``
+        (``fit_output_error``, ``fit_effects``) gets the rows and what the estimator declares it
+        takes. Returns ``self``."""
         kind = getattr(problem, "problem_type", "output_error")
         if kind not in self.problem_types:
             raise NotImplementedError(f"{type(self).__name__} does not fit {kind.replace('_', '-')} problems")
@@ -197,7 +210,8 @@ class Estimator:
         return self.fit(problem.X, problem.y, **kwargs)
 
     def _problem_inputs(self, problem) -> dict:
-        """The keyword arguments of ``fit`` a regression problem supplies, refused where not declared."""
+        """The keyword arguments of ``fit`` a regression problem supplies, refused where not
+        declared."""
         out = {}
         if problem.prior is not None:
             missing = problem.missing_prior()
@@ -221,11 +235,13 @@ class Estimator:
 
     def trust_verdict(self, structure_name: str, bias_sd: dict, dropped_differences: int, corrected: bool,
                       metrics: dict) -> tuple[bool, str] | None:
-        """``(trusted, note)`` of a regression run's intervals, or None: this estimator gives no verdict."""
+        """``(trusted, note)`` of a regression run's intervals, or None: this estimator gives no
+        verdict."""
         return None
 
     def skip(self, model, structure) -> tuple[bool, str]:
-        """``(True, reason)`` when this estimator cannot be used with this model and sample structure."""
+        """``(True, reason)`` when this estimator cannot be used with this model and sample
+        structure."""
         kind = "output_error" if structure.simulates else "regression"
         if kind not in self.problem_types:
             what = ("simulates the model through the record (output error)" if kind == "output_error"

@@ -1,11 +1,13 @@
-"""Posterior sampling with emcee (Foreman-Mackey et al. 2013, PASP 125, 306), the affine-invariant ensemble sampler
-(Goodman & Weare 2010), every step's whole ensemble evaluated in one vectorised call.
+"""Posterior sampling with emcee (Foreman-Mackey et al. 2013, PASP 125, 306), the affine-invariant
+ensemble sampler (Goodman & Weare 2010), every step's whole ensemble evaluated in one vectorised
+call.
 
-Likelihoods (``likelihood``; output error whenever the structure simulates): **regression** (default), the
-sandwich posterior (Mueller 2013) of the rows whitened for the noise the sample structure makes
-(``study.identify.row_noise``), the structure's truncation and the regressors' noise removed first (``correct_rows``,
-``study.identify.row_errors``); **regression_iid**, independent rows (right for white residuals only); **output
-error**, a noise scale per output channel. Priors, run length, moves and defaults, with their sources:
+Likelihoods (``likelihood``; output error whenever the structure simulates): **regression**
+(default), the sandwich posterior (Mueller 2013) of the rows whitened for the noise the sample
+structure makes (``study.identify.row_noise``), the structure's truncation and the regressors' noise
+removed first (``correct_rows``, ``study.identify.row_errors``); **regression_iid**, independent
+rows (right for white residuals only); **output error**, a noise scale per output channel. Priors,
+run length, moves and defaults, with their sources:
 ``docs/concepts/emcee.md``.
 """
 from __future__ import annotations
@@ -23,7 +25,8 @@ from .base import Estimator, as_arrays
 
 
 class EmceeSampler(Estimator):
-    """emcee ensemble sampler on the regression or output-error likelihood (see the module docstring).
+    """emcee ensemble sampler on the regression or output-error likelihood (see the module
+    docstring).
 
     Parameters
     ----------
@@ -32,8 +35,9 @@ class EmceeSampler(Estimator):
     target_ess : int
         Effective samples wanted (of the slowest-mixing parameter).
     max_steps, check_every, min_steps : int
-        Step budget, the chunk after which the stopping rule is checked, and a floor (emcee's estimate of tau is
-        biased low on short chains). ``check_every``, ``min_steps`` None (the default): :attr:`RUN_LENGTH`.
+        Step budget, the chunk after which the stopping rule is checked, and a floor (emcee's
+        estimate of tau is biased low on short chains). ``check_every``, ``min_steps`` None (the
+        default): :attr:`RUN_LENGTH`.
     prior_scale : float
         Width of the regression coefficients' default prior N(0, (prior_scale sd(y) / rms(X_j))^2).
     interval : float
@@ -44,23 +48,27 @@ class EmceeSampler(Estimator):
     min_tau_multiple : float
         The chain must be longer than this many autocorrelation times (emcee's guidance: 50).
     moves : str
-        'de' (DEMove 0.8, :class:`SnookerMove` 0.2; ter Braak & Vrugt 2008), 'stretch' (Goodman & Weare 2010,
-        emcee's default), 'laplace' (an independence proposal most of the steps, the DE moves the rest) or 'auto'
-        ('laplace' where a Gaussian approximation of the posterior exists, else 'de').
+        'de' (DEMove 0.8, :class:`SnookerMove` 0.2; ter Braak & Vrugt 2008), 'stretch' (Goodman &
+        Weare 2010, emcee's default), 'laplace' (an independence proposal most of the steps, the DE
+        moves the rest) or 'auto' ('laplace' where a Gaussian approximation of the posterior exists,
+        else 'de').
     init : str
-        Output error: 'local' (a Gauss-Newton fit from the problem's initial estimate), 'de' (differential
-        evolution over the box first: a KT model's likelihood has distant local optima) or 'auto' (DE for up to 10
-        parameters, else local).
+        Output error: 'local' (a Gauss-Newton fit from the problem's initial estimate), 'de'
+        (differential evolution over the box first: a KT model's likelihood has distant local
+        optima) or 'auto' (DE for up to 10 parameters, else local).
     prior : dict or None
-        ``{source, sd, offset}``: an informative prior (``study.identify.priors``), resolved for :meth:`fit`.
+        ``{source, sd, offset}``: an informative prior (``study.identify.priors``), resolved for
+        :meth:`fit`.
     likelihood : str
-        Regression structures: 'regression' (the rows' noise modelled with the structure's operators; default) or
-        'regression_iid' (independent rows). Output error ignores it.
+        Regression structures: 'regression' (the rows' noise modelled with the structure's
+        operators; default) or 'regression_iid' (independent rows). Output error ignores it.
     correct_rows : bool
-        'regression' likelihood: remove the structure's truncation and the regressors' noise from the rows first,
-        estimated from the run's own records (``study.identify.row_errors``, passed by ``study.identify.fit``).
+        'regression' likelihood: remove the structure's truncation and the regressors' noise from
+        the rows first, estimated from the run's own records (``study.identify.row_errors``, passed
+        by ``study.identify.fit``).
     n_probes : int
-        Noisy copies of the records the regressors' noise is measured with (``row_errors.N_PROBES``).
+        Noisy copies of the records the regressors' noise is measured with
+        (``row_errors.N_PROBES``).
     """
 
     problem_types = frozenset({"regression", "output_error"})
@@ -102,16 +110,18 @@ class EmceeSampler(Estimator):
     DE_SHARE = {"adapted": 0.2, "closed_form": 0.1}
 
     def _run_length(self, closed_form: bool) -> tuple[int, int]:
-        """(min_steps, check_every): the parameters as given, or the defaults of :attr:`RUN_LENGTH` when None."""
+        """(min_steps, check_every): the parameters as given, or the defaults of
+        :attr:`RUN_LENGTH` when None."""
         dflt = self.RUN_LENGTH["closed_form" if closed_form else "mixing"]
         return (int(dflt[0] if self.min_steps is None else self.min_steps),
                 int(dflt[1] if self.check_every is None else self.check_every))
 
     def _sample(self, log_prob, p0: np.ndarray, names: list, progress: bool, laplace=None, adapt: bool = True):
-        """Run the chain to the stopping rule or the step budget; keep its draws, diagnostics and saved chain.
-        ``laplace``: the independence proposal of ``moves`` 'laplace'/'auto', a :class:`LaplaceProposal` refitted
-        to the draws (output error, ``adapt``) or the posterior in closed form (regression, fixed). One function:
-        the moves, the chunked run with its refits and stopping rule, and the summary share the run's state."""
+        """Run the chain to the stopping rule or the step budget; keep its draws, diagnostics and
+        saved chain. ``laplace``: the independence proposal of ``moves`` 'laplace'/'auto', a
+        :class:`LaplaceProposal` refitted to the draws (output error, ``adapt``) or the posterior
+        in closed form (regression, fixed). One function: the moves, the chunked run with its
+        refits and stopping rule, and the summary share the run's state."""
         nw, ndim = p0.shape
         rng = np.random.default_rng(self.seed)
         kind = self.moves
@@ -209,8 +219,9 @@ class EmceeSampler(Estimator):
     LIKELIHOODS = ("regression", "regression_iid")
 
     def skip(self, model, structure) -> tuple[bool, str]:
-        """The iid regression likelihood asked of a structure that simulates is a sweep's cross product, not a
-        run: output error has its own likelihood, so the run would repeat the default one under another id."""
+        """The iid regression likelihood asked of a structure that simulates is a sweep's cross
+        product, not a run: output error has its own likelihood, so the run would repeat the
+        default one under another id."""
         if structure.simulates and self.likelihood == "regression_iid":
             return True, (f"likelihood 'regression_iid' is a regression likelihood; structure '{structure.name}' "
                           "simulates the model (its likelihood is the output error's, run with the default)")
@@ -222,16 +233,18 @@ class EmceeSampler(Estimator):
 
     @property
     def uses_noise_operators(self) -> bool:
-        """Whether :meth:`fit` wants the structure's noise operators (``study.identify.fit`` passes them)."""
+        """Whether :meth:`fit` wants the structure's noise operators (``study.identify.fit``
+        passes them)."""
         return self.likelihood == "regression"
 
     def trust_verdict(self, structure_name: str, bias_sd: dict, dropped_differences: int, corrected: bool,
                       metrics: dict) -> tuple[bool, str]:
-        """(trusted, note) of a regression run's intervals (:func:`study.identify.trust.run_verdict`), from the
-        run's own records: ``bias_sd`` the structure's truncation bias per reported parameter in posterior sd,
-        ``dropped_differences`` differenced rows cut afterwards, ``corrected`` whether the rows' errors were
-        removed, ``metrics`` the diagnostics every equation reported. An informative prior's posterior (the MAP
-        estimator's) is judged as the regression likelihood's."""
+        """(trusted, note) of a regression run's intervals
+        (:func:`study.identify.trust.run_verdict`), from the run's own records: ``bias_sd`` the
+        structure's truncation bias per reported parameter in posterior sd,
+        ``dropped_differences`` differenced rows cut afterwards, ``corrected`` whether the rows'
+        errors were removed, ``metrics`` the diagnostics every equation reported. An informative
+        prior's posterior (the MAP estimator's) is judged as the regression likelihood's."""
         from ..trust import run_verdict
 
         likelihood = self.likelihood if getattr(self, "prior_sd_", None) is None else "regression"
@@ -244,7 +257,8 @@ class EmceeSampler(Estimator):
 
     @property
     def uses_row_errors(self) -> bool:
-        """The rows' truncation and regressors' noise are corrected (``study.identify.row_errors``)."""
+        """The rows' truncation and regressors' noise are corrected
+        (``study.identify.row_errors``)."""
         return self.likelihood == "regression" and bool(self.correct_rows)
 
     @property
@@ -253,10 +267,11 @@ class EmceeSampler(Estimator):
         return self.n_probes
 
     def gaussian_regression(self, X, y, noise_operators=None, q_raw=None, prior_sd=None, errors=None):
-        """(mean, covariance, diagnostics, noise model or None) of the coefficients' posterior under the 'regression'
-        likelihood and the default prior: what :meth:`fit` samples, in closed form. ``q_raw``, ``prior_sd``: a noise
-        mix and prior widths taken as given (the same likelihood on other rows, e.g. noise-free ones); ``errors``:
-        the rows' errors to remove (``study.identify.row_errors.RowErrors``; with the operators only)."""
+        """(mean, covariance, diagnostics, noise model or None) of the coefficients' posterior
+        under the 'regression' likelihood and the default prior: what :meth:`fit` samples, in
+        closed form. ``q_raw``, ``prior_sd``: a noise mix and prior widths taken as given (the
+        same likelihood on other rows, e.g. noise-free ones); ``errors``: the rows' errors to
+        remove (``study.identify.row_errors.RowErrors``; with the operators only)."""
         from .prior import gaussian_posterior, gls_posterior
 
         X, y, _ = as_arrays(X, y)
@@ -281,10 +296,11 @@ class EmceeSampler(Estimator):
     def fit(self, X, y, progress: bool = False, prior: dict | None = None, noise_operators=None, row_errors=None,
             neighbours=None):
         """Sample the posterior of ``y = X theta + e``. ``noise_operators``: the structure's, a
-        ``study.identify.row_noise.RowOperators`` (``study.identify.fit`` passes it), used by the 'regression'
-        likelihood, with ``row_errors`` (``study.identify.row_errors.RowErrors``) removed when ``correct_rows``;
-        ``prior``: an informative prior (then the MAP estimator's posterior is sampled, whatever the likelihood);
-        ``neighbours``: terms the model lacks on the same rows, tested for the trust verdict (regression only)."""
+        ``study.identify.row_noise.RowOperators`` (``study.identify.fit`` passes it), used by the
+        'regression' likelihood, with ``row_errors`` (``study.identify.row_errors.RowErrors``)
+        removed when ``correct_rows``; ``prior``: an informative prior (then the MAP estimator's
+        posterior is sampled, whatever the likelihood); ``neighbours``: terms the model lacks on
+        the same rows, tested for the trust verdict (regression only)."""
         if self.likelihood not in self.LIKELIHOODS:
             raise ValueError(f"emcee: likelihood must be one of {self.LIKELIHOODS}, got {self.likelihood!r}")
         X, y, names = as_arrays(X, y)
@@ -352,8 +368,9 @@ class EmceeSampler(Estimator):
         return self
 
     def _sample_gaussian(self, mean, cov, names, progress: bool):
-        """emcee on N(mean, cov) in standardised coordinates, walkers drawn from it (no burn-in); under 'auto' or
-        'laplace' the main move proposes from N(mean, cov) itself (every such proposal accepted, up to rounding)."""
+        """emcee on N(mean, cov) in standardised coordinates, walkers drawn from it (no burn-in);
+        under 'auto' or 'laplace' the main move proposes from N(mean, cov) itself (every such
+        proposal accepted, up to rounding)."""
         k = len(mean)
         sd = np.sqrt(np.diag(cov))
         Pz = np.linalg.inv(cov / np.outer(sd, sd))  # precision of the standardised coefficients
@@ -372,9 +389,10 @@ class EmceeSampler(Estimator):
         self._summarise(flat, q, k)
 
     def _fit_informative(self, X, y, names, prior: dict, progress: bool):
-        """The posterior under the informative prior N(mean0, sd0^2) per coefficient and the records' sandwich
-        likelihood (the MAP estimator's model, module ``prior``): Gaussian, but sampled (:meth:`_sample_gaussian`)
-        so that the draws feed the predictive bands and the chain diagnostics like any other run's."""
+        """The posterior under the informative prior N(mean0, sd0^2) per coefficient and the
+        records' sandwich likelihood (the MAP estimator's model, module ``prior``): Gaussian, but
+        sampled (:meth:`_sample_gaussian`) so that the draws feed the predictive bands and the
+        chain diagnostics like any other run's."""
         from .prior import gaussian_posterior
 
         mean0 = np.array([prior[c][0] for c in names], float)
@@ -389,8 +407,9 @@ class EmceeSampler(Estimator):
 
     # ---------------------------------------------------------------------------------- output error
     def fit_output_error(self, problem, progress: bool = False):
-        """Sample the output-error posterior of ``problem`` (``study.identify.output_error``), the walkers started
-        at the Laplace approximation at the fit (differential evolution first per ``init``)."""
+        """Sample the output-error posterior of ``problem`` (``study.identify.output_error``),
+        the walkers started at the Laplace approximation at the fit (differential evolution first
+        per ``init``)."""
         from ..output_error import DIVERGED, local_fit
 
         k, nc = problem.k, len(problem.outputs)
@@ -457,10 +476,11 @@ class EmceeSampler(Estimator):
 
 
 def _oe_laplace(problem, x0, nobs, max_iter: int = 10):
-    """Laplace approximation (mean, covariance) of the output-error posterior at its mode, or None: the mode by
-    reweighted Gauss-Newton (channel weights 1 / sigma_c^2, sigma_c^2 = SSE_c / n_c, until they settle), the
-    parameters' covariance (J^T J)^-1 of the residuals normalised by sigma_c, log sigma_c N(log sigma_c, 1 / (2 n_c))
-    independent of them. Derivation: ``docs/concepts/emcee.md``."""
+    """Laplace approximation (mean, covariance) of the output-error posterior at its mode, or
+    None: the mode by reweighted Gauss-Newton (channel weights 1 / sigma_c^2, sigma_c^2 = SSE_c /
+    n_c, until they settle), the parameters' covariance (J^T J)^-1 of the residuals normalised by
+    sigma_c, log sigma_c N(log sigma_c, 1 / (2 n_c)) independent of them. Derivation:
+    ``docs/concepts/emcee.md``."""
     from ..output_error import local_fit
 
     x = np.asarray(x0, float)
@@ -491,10 +511,11 @@ def _oe_laplace(problem, x0, nobs, max_iter: int = 10):
 
 
 class SnookerMove(emcee.moves.DESnookerMove):
-    """The differential-evolution snooker move of ter Braak & Vrugt (2008, Stat. Comput. 18, 435-446, Sec. 3.2):
-    from a walker x and a random walker z of the other half of the ensemble, a step along the line through x and z
-    by gamma times the difference of the projections of two more walkers z1, z2 on it, accepted with the extra
-    factor (|x' - z| / |x - z|)^(d - 1). Written here because emcee's ``DESnookerMove`` (3.1.6) normalises by
+    """The differential-evolution snooker move of ter Braak & Vrugt (2008, Stat. Comput. 18,
+    435-446, Sec. 3.2): from a walker x and a random walker z of the other half of the ensemble, a
+    step along the line through x and z by gamma times the difference of the projections of two more
+    walkers z1, z2 on it, accepted with the extra factor (|x' - z| / |x - z|)^(d - 1). Written here
+    because emcee's ``DESnookerMove`` (3.1.6) normalises by
     |x - z| where the formulas need |x - z|^2, so it does not leave the target invariant."""
 
     def get_proposal(self, s, c, random):
@@ -517,11 +538,12 @@ class SnookerMove(emcee.moves.DESnookerMove):
 
 
 class LaplaceProposal:
-    """Independence proposal for emcee's ``MHMove``: a multivariate t with ``df`` degrees of freedom, location
-    ``mean`` and scale matrix ``inflate^2 cov`` (the Laplace approximation), cut by the box [lo, hi]. Heavy tails
-    and the inflation keep the ratio target / proposal bounded; the Metropolis-Hastings correction (emcee's
-    ``factors``) keeps the chain exact. ``df=inf``: a normal (the regression posteriors in closed form). Written
-    here because emcee ships no independence move."""
+    """Independence proposal for emcee's ``MHMove``: a multivariate t with ``df`` degrees of
+    freedom, location ``mean`` and scale matrix ``inflate^2 cov`` (the Laplace approximation),
+    cut by the box [lo, hi]. Heavy tails and the inflation keep the ratio target / proposal
+    bounded; the Metropolis-Hastings correction (emcee's ``factors``) keeps the chain exact.
+    ``df=inf``: a normal (the regression posteriors in closed form). Written here because emcee
+    ships no independence move."""
 
     def __init__(self, mean, cov, lo=None, hi=None, df: float = 5.0, inflate: float = 1.1):
         self.mean = np.asarray(mean, float)
@@ -541,7 +563,8 @@ class LaplaceProposal:
         return -0.5 * (self.df + len(self.mean)) * np.log1p(r2 / self.df)
 
     def refit(self, draws):
-        """Location and scale from draws of the target (their mean and covariance), keeping df and the box."""
+        """Location and scale from draws of the target (their mean and covariance), keeping df
+        and the box."""
         cov = np.cov(np.asarray(draws, float).T)
         try:
             L = np.linalg.cholesky(cov)
@@ -575,12 +598,14 @@ class LaplaceProposal:
 
 
 class IidRegressionProposal:
-    """Independence proposal for the 'regression_iid' likelihood: its posterior under a flat prior on the
-    coefficients and the Jeffreys prior on log sigma, drawn exactly (normal-inverse-gamma; Gelman et al. 2013,
-    Bayesian Data Analysis, 3rd ed., Sec. 14.2): theta a multivariate t with n - k degrees of freedom, location the
-    least-squares estimate and scale s^2 (X^T X)^-1, s^2 = SS_min / (n - k); then sigma^2 = SS(theta) / chi^2_n.
-    Its log density is the target's likelihood, so nearly every proposal is accepted (``docs/concepts/emcee.md``);
-    draws outside the box of log sigma are redrawn, as in :class:`LaplaceProposal`."""
+    """Independence proposal for the 'regression_iid' likelihood: its posterior under a flat
+    prior on the coefficients and the Jeffreys prior on log sigma, drawn exactly
+    (normal-inverse-gamma; Gelman et al. 2013, Bayesian Data Analysis, 3rd ed., Sec. 14.2): theta
+    a multivariate t with n - k degrees of freedom, location the least-squares estimate and scale
+    s^2 (X^T X)^-1, s^2 = SS_min / (n - k); then sigma^2 = SS(theta) / chi^2_n. Its log density
+    is the target's likelihood, so nearly every proposal is accepted
+    (``docs/concepts/emcee.md``); draws outside the box of log sigma are redrawn, as in
+    :class:`LaplaceProposal`."""
 
     def __init__(self, ls, A, ss_min: float, n: int, lo_s: float, hi_s: float):
         self.ls, self.A = np.asarray(ls, float), np.asarray(A, float)

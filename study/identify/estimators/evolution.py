@@ -1,16 +1,18 @@
-"""Differential evolution (Storn & Price 1997), scipy's implementation, on the output error or a regression.
+"""Differential evolution (Storn & Price 1997), scipy's implementation, on the output error or a
+regression.
 
-Zheng & Xiao (2017, Sec. 1.1, eqs. 1-5) identifies the nonlinear KT parameters by DE with the
-"best" mutation (eq. 3), binomial crossover (eq. 4) and greedy selection (eq. 5): scipy's
-``strategy='best1bin'``. Every generation is evaluated in ONE call (``vectorized=True``): on an output-error
-problem the whole population is simulated in lock-step by the compiled batch integrator
-(``study.identify.output_error``), which is what makes DE affordable. All the records of a run enter one
-objective (Zheng & Xiao's (2017) "parallel processing", Sec. 1.2). The result is polished by a bounded Gauss-Newton fit
-(``output_error.local_fit``: its Jacobian is one batch simulation too) when ``polish`` is set.
+Zheng & Xiao (2017, Sec. 1.1, eqs. 1-5) identifies the nonlinear KT parameters by DE with the "best"
+mutation (eq. 3), binomial crossover (eq. 4) and greedy selection (eq. 5): scipy's
+``strategy='best1bin'``. Every generation is evaluated in ONE call (``vectorized=True``): on an
+output-error problem the whole population is simulated in lock-step by the compiled batch integrator
+(``study.identify.output_error``), which is what makes DE affordable. All the records of a run enter
+one objective (Zheng & Xiao's (2017) "parallel processing", Sec. 1.2). The result is polished by a
+bounded Gauss-Newton fit (``output_error.local_fit``: its Jacobian is one batch simulation too) when
+``polish`` is set.
 
-On a regression structure DE minimises the mean squared equation error inside a box around the least-squares
-solution; it then finds least squares again (slowly). It is there so that DE can be compared on every
-structure, as Zheng & Xiao (2017) compares it on differences and on integration.
+On a regression structure DE minimises the mean squared equation error inside a box around the
+least-squares solution; it then finds least squares again (slowly). It is there so that DE can be
+compared on every structure, as Zheng & Xiao (2017) compares it on differences and on integration.
 """
 from __future__ import annotations
 
@@ -41,10 +43,12 @@ class DifferentialEvolution(Estimator):
         Finish with a bounded Gauss-Newton (output error) / L-BFGS-B (regression) local fit.
     seed : int
     box_relative, box_floor : float
-        Regression only: the box is theta_LS +- max(box_relative |theta_LS|, box_floor max|theta_LS|).
+        Regression only: the box is theta_LS +- max(box_relative |theta_LS|, box_floor
+        max|theta_LS|).
     use_x0 : bool
-        Output error: put the problem's initial estimate (equation-error least squares) into the initial
-        population. Off by default: Zheng & Xiao's (2017) point is that DE needs no initial values.
+        Output error: put the problem's initial estimate (equation-error least squares) into the
+        initial population. Off by default: Zheng & Xiao's (2017) point is that DE needs no initial
+        values.
     """
 
     problem_types = frozenset({"regression", "output_error"})

@@ -1,8 +1,9 @@
-"""Linear least-squares estimators: ordinary least squares, ridge (contiguous K-fold CV) and lasso (LassoCV).
+"""Linear least-squares estimators: ordinary least squares, ridge (contiguous K-fold CV) and lasso
+(LassoCV).
 
-Also the small helpers the other estimator modules share: column standardisation without centring (the
-regressions have no intercept) and the R factor of ``[Z, y]`` from which every ridge-type solution and its
-residual norm follow stably (no normal equations).
+Also the small helpers the other estimator modules share: column standardisation without centring
+(the regressions have no intercept) and the R factor of ``[Z, y]`` from which every ridge-type
+solution and its residual norm follow stably (no normal equations).
 """
 from __future__ import annotations
 
@@ -30,8 +31,8 @@ def check_regression(X, y):
 def column_scale(X) -> np.ndarray:
     """Root mean square of each column (1 for an all-zero column).
 
-    The regressions have no intercept, so columns are scaled but never centred: ``Z = X / s`` has unit
-    mean square per column, and a coefficient on ``Z`` is ``b_j = theta_j * s_j``.
+    The regressions have no intercept, so columns are scaled but never centred: ``Z = X / s`` has
+    unit mean square per column, and a coefficient on ``Z`` is ``b_j = theta_j * s_j``.
     """
     s = np.sqrt(np.mean(X * X, axis=0))
     s[~(s > 0)] = 1.0
@@ -46,10 +47,11 @@ def rms(y) -> float:
 def r_factor(Z, y, block: int = 2048) -> np.ndarray:
     """Upper-triangular ``R`` ((k+1) x (k+1)) of the QR factorisation of ``[Z, y]``.
 
-    ``[Z, y] = Q R`` gives, for any coefficient vector ``w``: ``||y - Z w|| = ||R @ [-w, 1]||``; the leading
-    k x k block is the R of Z, column k holds ``Q^T y`` and ``R[k, k]**2`` is the least-squares residual.
-    Computed blockwise (tall-skinny QR: QR of each block, then of the stacked R's), which is both faster
-    (cache) and as stable as one Householder QR. Rows of zeros are appended when n < k + 1.
+    ``[Z, y] = Q R`` gives, for any coefficient vector ``w``: ``||y - Z w|| = ||R @ [-w, 1]||``; the
+    leading k x k block is the R of Z, column k holds ``Q^T y`` and ``R[k, k]**2`` is the
+    least-squares residual. Computed blockwise (tall-skinny QR: QR of each block, then of the
+    stacked R's), which is both faster (cache) and as stable as one Householder QR. Rows of zeros
+    are appended when n < k + 1.
     """
     A = np.column_stack([Z, y])
     m = A.shape[1]
@@ -63,7 +65,8 @@ def r_factor(Z, y, block: int = 2048) -> np.ndarray:
 
 
 def ridge_path(R: np.ndarray, lams) -> np.ndarray:
-    """Ridge coefficients (k x len(lams)) of ``min ||y - Z w||^2 + lam ||w||^2`` from ``R = r_factor(Z, y)``."""
+    """Ridge coefficients (k x len(lams)) of ``min ||y - Z w||^2 + lam ||w||^2`` from ``R =
+    r_factor(Z, y)``."""
     k = R.shape[1] - 1
     U, s, Vt = linalg.svd(R[:k, :k], check_finite=False)
     c = U.T @ R[:k, k]
@@ -73,10 +76,12 @@ def ridge_path(R: np.ndarray, lams) -> np.ndarray:
 
 
 def contiguous_folds(n: int, n_splits: int):
-    """Contiguous K-fold splits (sklearn ``KFold`` without shuffling) as lists of validation index arrays.
+    """Contiguous K-fold splits (sklearn ``KFold`` without shuffling) as lists of validation index
+    arrays.
 
-    Samples of a manoeuvre are strongly autocorrelated: a held-out sample is nearly a copy of its neighbours,
-    so shuffled folds (or leave-one-out) reward fitting the noise. Contiguous blocks hold out whole stretches.
+    Samples of a manoeuvre are strongly autocorrelated: a held-out sample is nearly a copy of its
+    neighbours, so shuffled folds (or leave-one-out) reward fitting the noise. Contiguous blocks
+    hold out whole stretches.
     """
     n_splits = int(min(n_splits, n))
     if n_splits < 2:
@@ -87,7 +92,8 @@ def contiguous_folds(n: int, n_splits: int):
 
 
 def log_grid(spec, name: str) -> np.ndarray:
-    """``[lo, hi, num]`` -> ``logspace(log10 lo, log10 hi, num)``; a single number -> that value alone."""
+    """``[lo, hi, num]`` -> ``logspace(log10 lo, log10 hi, num)``; a single number -> that value
+    alone."""
     if np.isscalar(spec):
         v = float(spec)
         if not v > 0:
@@ -108,7 +114,8 @@ class LeastSquares(Estimator):
     Parameters
     ----------
     rcond : float or None
-        Relative cut-off for small singular values (None: machine precision times the larger dimension).
+        Relative cut-off for small singular values (None: machine precision times the larger
+        dimension).
     """
 
     def __init__(self, rcond: float | None = None):
@@ -126,22 +133,24 @@ class LeastSquares(Estimator):
 
 
 class Ridge(Estimator):
-    """Ridge regression (Hoerl & Kennard 1970) without intercept, lambda by contiguous K-fold cross-validation.
+    """Ridge regression (Hoerl & Kennard 1970) without intercept, lambda by contiguous K-fold
+    cross-validation.
 
-    Columns are standardised inside ``fit`` (divided by their root mean square, not centred: there is no
-    intercept), the ridge problem ``min (1/n)||y - Z b||^2 + alpha ||b||^2`` is solved on them and the
-    coefficients are mapped back (``theta = b / s``). ``alpha`` is therefore relative: it is compared with
-    the eigenvalues of ``Z^T Z / n`` (trace k), whatever the units of X and y.
+    Columns are standardised inside ``fit`` (divided by their root mean square, not centred: there
+    is no intercept), the ridge problem ``min (1/n)||y - Z b||^2 + alpha ||b||^2`` is solved on them
+    and the coefficients are mapped back (``theta = b / s``). ``alpha`` is therefore relative: it is
+    compared with the eigenvalues of ``Z^T Z / n`` (trace k), whatever the units of X and y.
 
-    Cross-validation: contiguous folds (``KFold`` without shuffling). Samples of a manoeuvre are strongly
-    autocorrelated, so leave-one-out / GCV (sklearn ``RidgeCV``'s efficient mode) sees each held-out sample's
-    neighbours in the training set and picks too little regularisation; contiguous blocks hold out whole
-    stretches of manoeuvre. The lowest mean validation error wins.
+    Cross-validation: contiguous folds (``KFold`` without shuffling). Samples of a manoeuvre are
+    strongly autocorrelated, so leave-one-out / GCV (sklearn ``RidgeCV``'s efficient mode) sees each
+    held-out sample's neighbours in the training set and picks too little regularisation; contiguous
+    blocks hold out whole stretches of manoeuvre. The lowest mean validation error wins.
 
-    Why not ``sklearn.linear_model.RidgeCV(cv=KFold(5))``: with a ``cv`` it refits every alpha on every fold
-    through ``GridSearchCV`` (1.6 s on 16,800 x 11 for 61 alphas, measured). Here the whole path of every
-    fold comes from the R factors of the folds (one tall-skinny QR pass over the data, then k x k SVDs), a
-    few milliseconds, and validation errors are norms of small matrices (no cancellation on noise-free data).
+    Why not ``sklearn.linear_model.RidgeCV(cv=KFold(5))``: with a ``cv`` it refits every alpha on
+    every fold through ``GridSearchCV`` (1.6 s on 16,800 x 11 for 61 alphas, measured). Here the
+    whole path of every fold comes from the R factors of the folds (one tall-skinny QR pass over the
+    data, then k x k SVDs), a few milliseconds, and validation errors are norms of small matrices
+    (no cancellation on noise-free data).
 
     Parameters
     ----------
@@ -191,19 +200,21 @@ class Lasso(Estimator):
     """Lasso (Tibshirani 1996) by scikit-learn's ``LassoCV``, as Song et al. (2025, eqs. 11-12).
 
     10-fold cross-validation (contiguous folds: ``KFold`` without shuffling, sklearn's default for
-    ``cv=10``) over ``alphas`` log-spaced in 1e-6..1e6 like the seed, no intercept. Columns *and* y are
-    standardised inside ``fit`` (divided by their root mean square, not centred), so alpha is relative:
-    sklearn's objective ``(1/2n)||y - Z b||^2 + alpha ||b||_1`` on unit-mean-square data, where every
-    coefficient is zero above ``max|Z^T y|/n <= 1`` (the upper half of the seed's range selects nothing).
-    Coefficients are mapped back to the units of X and y. The seed's own lambda multiplies a *sum* of
-    squares: lambda_seed = 2 n alpha.
+    ``cv=10``) over ``alphas`` log-spaced in 1e-6..1e6 like the seed, no intercept. Columns *and* y
+    are standardised inside ``fit`` (divided by their root mean square, not centred), so alpha is
+    relative: sklearn's objective ``(1/2n)||y - Z b||^2 + alpha ||b||_1`` on unit-mean-square data,
+    where every coefficient is zero above ``max|Z^T y|/n <= 1`` (the upper half of the seed's range
+    selects nothing). Coefficients are mapped back to the units of X and y. The seed's own lambda
+    multiplies a *sum* of squares: lambda_seed = 2 n alpha.
 
-    ``selected_`` marks the nonzero terms; ``refit=True`` re-estimates the selected terms by least squares
-    (the relaxed lasso of Meinshausen 2007 at relaxation 0), which removes the shrinkage of the kept ones.
+    ``selected_`` marks the nonzero terms; ``refit=True`` re-estimates the selected terms by least
+    squares (the relaxed lasso of Meinshausen 2007 at relaxation 0), which removes the shrinkage of
+    the kept ones.
 
     Coordinate descent on strongly collinear columns is slow at the small-alpha end of the path: the
-    default ``max_iter`` / ``tol`` let every alpha converge (no ConvergenceWarning on the benchmark data);
-    if one still does not, the warning is caught and reported as ``diagnostics_['converged'] = 0``.
+    default ``max_iter`` / ``tol`` let every alpha converge (no ConvergenceWarning on the benchmark
+    data); if one still does not, the warning is caught and reported as ``diagnostics_['converged']
+    = 0``.
 
     Parameters
     ----------

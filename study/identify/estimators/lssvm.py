@@ -1,22 +1,25 @@
-"""Least-squares support vector machines with a linear kernel: batch, truncated (L-curve) and online.
+"""Least-squares support vector machines with a linear kernel: batch, truncated (L-curve) and
+online.
 
-With a linear kernel ``K(x, x') = x . x'`` the LS-SVM (Suykens & Vandewalle 1999; Suykens et al. 2002)
+With a linear kernel ``K(x, x') = x . x'`` the LS-SVM (Suykens & Vandewalle 1999; Suykens et al.
+2002)
 
     min 1/2 |w|^2 + gamma/2 sum e_i^2   s.t.   y_i = w . x_i + b + e_i
 
-has the dual ``[[0, 1^T], [1, Omega + I/gamma]] [b; alpha] = [0; y]`` with ``Omega = X X^T`` and
-``w = X^T alpha``: the coefficients of the ship model are ``w``. Eliminating ``e`` gives the primal normal
-equations ``(X^T X + I/gamma) w = X^T y`` (ridge with lambda = 1/gamma), with the bias by centring X and y
-(the unpenalised b is the exact equivalent of the bordered dual). The dual is n x n, so it is used only for
-small n (``max_dual``); an n x n matrix is never formed for n > 5000.
+has the dual ``[[0, 1^T], [1, Omega + I/gamma]] [b; alpha] = [0; y]`` with ``Omega = X X^T`` and ``w
+= X^T alpha``: the coefficients of the ship model are ``w``. Eliminating ``e`` gives the primal
+normal equations ``(X^T X + I/gamma) w = X^T y`` (ridge with lambda = 1/gamma), with the bias by
+centring X and y (the unpenalised b is the exact equivalent of the bordered dual). The dual is n x
+n, so it is used only for small n (``max_dual``); an n x n matrix is never formed for n > 5000.
 
-All three classes standardise the columns inside ``fit`` by default (``standardize=True``: each column
-divided by its root mean square, not centred) and map the coefficients back, so ``gamma`` is the LS-SVM's
-gamma on unit-mean-square columns: ``1/gamma`` is compared with the eigenvalues of ``Z^T Z`` (trace n k).
-y is not scaled (the solution is linear in y).
+All three classes standardise the columns inside ``fit`` by default (``standardize=True``: each
+column divided by its root mean square, not centred) and map the coefficients back, so ``gamma`` is
+the LS-SVM's gamma on unit-mean-square columns: ``1/gamma`` is compared with the eigenvalues of
+``Z^T Z`` (trace n k). y is not scaled (the solution is linear in y).
 
-Written by hand (no maintained Python LS-SVM solves the linear-kernel primal, the truncated SVD form of
-Xu & Guedes Soares or the incremental inverse of Du et al. (2016)); the linear algebra is LAPACK through scipy.
+Written by hand (no maintained Python LS-SVM solves the linear-kernel primal, the truncated SVD form
+of Xu & Guedes Soares or the incremental inverse of Du et al. (2016)); the linear algebra is LAPACK
+through scipy.
 """
 from __future__ import annotations
 
@@ -49,20 +52,23 @@ def _use_dual(n: int, max_dual) -> bool:
 
 
 def _svd_R(R):
-    """Thin SVD of the regression from its R factor: singular values s, V, and c = U^T Q^T y, rss0."""
+    """Thin SVD of the regression from its R factor: singular values s, V, and c = U^T Q^T y,
+    rss0."""
     k = R.shape[1] - 1
     U, s, Vt = linalg.svd(R[:k, :k], check_finite=False)
     return s, Vt.T, U.T @ R[:k, k], float(R[k, k] ** 2)
 
 
 def gcv_gamma(R, n: int, bias: bool, lo: float = 1e-12, hi: float = 1e2, num: int = 141):
-    """gamma = 1/lambda minimising generalised cross-validation (Golub, Heath & Wahba 1979) of the ridge.
+    """gamma = 1/lambda minimising generalised cross-validation (Golub, Heath & Wahba 1979) of the
+    ridge.
 
-    ``GCV(lambda) = n RSS(lambda) / (n - df(lambda))^2`` with ``df = sum s_i^2 / (s_i^2 + lambda)`` (+1 for
-    the bias), all from one SVD (of the R factor of the centred problem). lambda is searched on a log grid
-    ``s_1^2 * logspace(log10 lo, log10 hi, num)``: relative to the largest eigenvalue of ``Z^T Z``, so the
-    search does not depend on units or n; the lower end (1e-12) keeps the n x n dual matrix solvable
-    (condition <= 1e12). Written by hand: sklearn's ``RidgeCV`` computes leave-one-out, not GCV.
+    ``GCV(lambda) = n RSS(lambda) / (n - df(lambda))^2`` with ``df = sum s_i^2 / (s_i^2 + lambda)``
+    (+1 for the bias), all from one SVD (of the R factor of the centred problem). lambda is searched
+    on a log grid ``s_1^2 * logspace(log10 lo, log10 hi, num)``: relative to the largest eigenvalue
+    of ``Z^T Z``, so the search does not depend on units or n; the lower end (1e-12) keeps the n x n
+    dual matrix solvable (condition <= 1e12). Written by hand: sklearn's ``RidgeCV`` computes
+    leave-one-out, not GCV.
     """
     s, _, c, rss0 = _svd_R(R)
     if not s.size or s[0] <= 0:
@@ -105,13 +111,14 @@ def _dual_matrix(Z, gamma, bias):
 
 
 def lcurve_corner(rho, eta) -> int:
-    """Index of the corner of a discrete L-curve ``(rho_r, eta_r)``, r increasing (residual falls, norm grows).
+    """Index of the corner of a discrete L-curve ``(rho_r, eta_r)``, r increasing (residual falls,
+    norm grows).
 
-    Rule (the chord / triangle idea of Castellanos, Gomez & Guerra 2002 for the L-curve of Hansen & O'Leary
-    1993): in log-log coordinates, the point farthest from the chord joining the first and the last point
-    *on the side of the origin* (below-left: small residual and small norm). If no point lies on that side
-    (no vertical branch: the solution norm never blows up, e.g. well-conditioned noise-free data) the last
-    point, the least truncated, is the corner.
+    Rule (the chord / triangle idea of Castellanos, Gomez & Guerra 2002 for the L-curve of Hansen &
+    O'Leary 1993): in log-log coordinates, the point farthest from the chord joining the first and
+    the last point *on the side of the origin* (below-left: small residual and small norm). If no
+    point lies on that side (no vertical branch: the solution norm never blows up, e.g.
+    well-conditioned noise-free data) the last point, the least truncated, is the corner.
     """
     rho = np.asarray(rho, dtype=float)
     eta = np.asarray(eta, dtype=float)
@@ -137,20 +144,23 @@ def lcurve_corner(rho, eta) -> int:
 
 # ---------------------------------------------------------------------------------------------- estimators
 class LSSVM(Estimator):
-    """Linear-kernel least-squares SVM (Suykens & Vandewalle 1999; Suykens et al. 2002), exact dual or primal.
+    """Linear-kernel least-squares SVM (Suykens & Vandewalle 1999; Suykens et al. 2002), exact dual
+    or primal.
 
-    For n <= ``max_dual`` the literal dual system ``[[0, 1^T], [1, Omega + I/gamma]] [b; alpha] = [0; y]``
-    (``Omega = Z Z^T``; without bias ``(Omega + I/gamma) alpha = y``) is solved and ``w = Z^T alpha``; above,
-    the equivalent primal ridge ``(Zc^T Zc + I/gamma) w = Zc^T yc`` (Zc, yc centred when ``bias``; ``b = mean(y)
-    - mean(Z) . w``), solved stably from the R factor of ``[Zc, yc]``. Columns are standardised inside ``fit``
+    For n <= ``max_dual`` the literal dual system ``[[0, 1^T], [1, Omega + I/gamma]] [b; alpha] =
+    [0; y]`` (``Omega = Z Z^T``; without bias ``(Omega + I/gamma) alpha = y``) is solved and ``w =
+    Z^T alpha``; above, the equivalent primal ridge ``(Zc^T Zc + I/gamma) w = Zc^T yc`` (Zc, yc
+    centred when ``bias``; ``b = mean(y)
+    - mean(Z) . w``), solved stably from the R factor of ``[Zc, yc]``. Columns are standardised
+      inside ``fit``
     (``standardize``; see the module docstring) and coefficients mapped back.
 
     Parameters
     ----------
     gamma : 'gcv' or float
         Regularisation (LS-SVM gamma on standardised columns); 'gcv' chooses it by generalised
-        cross-validation of the primal ridge from one SVD (``gcv_gamma``). GCV treats samples as independent:
-        on autocorrelated manoeuvre data it leans towards too little regularisation.
+        cross-validation of the primal ridge from one SVD (``gcv_gamma``). GCV treats samples as
+        independent: on autocorrelated manoeuvre data it leans towards too little regularisation.
     bias : bool
         Estimate the bias b (the seed papers do). Default False: the regressors carry every term.
     max_dual : int
@@ -196,33 +206,36 @@ class LSSVM(Estimator):
 
 
 class TruncatedLSSVM(Estimator):
-    """Optimal truncated LS-SVM (Xu & Guedes Soares, sec. 3): TSVD of the LS-SVM matrix, rank by L-curve.
+    """Optimal truncated LS-SVM (Xu & Guedes Soares, sec. 3): TSVD of the LS-SVM matrix, rank by
+    L-curve.
 
-    The LS-SVM matrix ``A`` (``Omega + I/gamma``, or bordered with the bias) is replaced by its rank-r
-    truncated SVD, keeping the r largest singular values, and r is chosen at the corner of the L-curve
-    (Hansen & O'Leary 1993; corner rule in ``lcurve_corner``).
+    The LS-SVM matrix ``A`` (``Omega + I/gamma``, or bordered with the bias) is replaced by its
+    rank-r truncated SVD, keeping the r largest singular values, and r is chosen at the corner of
+    the L-curve (Hansen & O'Leary 1993; corner rule in ``lcurve_corner``).
 
-    Forms. Without bias, the eigen-pairs of ``Omega + I/gamma`` are ``(s_i^2 + 1/gamma, u_i)`` for the k
-    singular triplets ``(s_i, u_i, v_i)`` of Z and ``1/gamma`` on the complement of range(Z), which
-    ``w = Z^T alpha`` annihilates. So for r <= k the dual TSVD equals the filtered primal TSVD
-    ``w_r = sum_{i<=r} v_i s_i (u_i^T y) / (s_i^2 + 1/gamma)`` and r > k adds nothing: the L-curve runs over
-    r = 1..min(n, k) in both forms. n <= ``max_dual``: the literal SVD of the n x n (or (n+1) x (n+1))
-    matrix (computed as its symmetric eigendecomposition, which for a symmetric matrix is the SVD); above:
-    the primal from the SVD of Z's R factor (never an n x n matrix).
-    With bias, the literal dual has k + 2 nontrivial singular values (k from the data, two from the border);
-    its L-curve runs over r = 1..min(n + 1, k + 2), and r = k + 2 is the exact LS-SVM. For large n the
-    primal centres Z and y (b = mean(y) - mean(Z) . w) and truncates the centred problem: r = k is the exact
-    untruncated LS-SVM with bias, but for r < k the centred truncation is *not* the truncation of the
-    bordered matrix (exact only untruncated).
+    Forms. Without bias, the eigen-pairs of ``Omega + I/gamma`` are ``(s_i^2 + 1/gamma, u_i)`` for
+    the k singular triplets ``(s_i, u_i, v_i)`` of Z and ``1/gamma`` on the complement of range(Z),
+    which ``w = Z^T alpha`` annihilates. So for r <= k the dual TSVD equals the filtered primal TSVD
+    ``w_r = sum_{i<=r} v_i s_i (u_i^T y) / (s_i^2 + 1/gamma)`` and r > k adds nothing: the L-curve
+    runs over r = 1..min(n, k) in both forms. n <= ``max_dual``: the literal SVD of the n x n (or
+    (n+1) x (n+1)) matrix (computed as its symmetric eigendecomposition, which for a symmetric
+    matrix is the SVD); above: the primal from the SVD of Z's R factor (never an n x n matrix). With
+    bias, the literal dual has k + 2 nontrivial singular values (k from the data, two from the
+    border); its L-curve runs over r = 1..min(n + 1, k + 2), and r = k + 2 is the exact LS-SVM. For
+    large n the primal centres Z and y (b = mean(y) - mean(Z) . w) and truncates the centred
+    problem: r = k is the exact untruncated LS-SVM with bias, but for r < k the centred truncation
+    is *not* the truncation of the bordered matrix (exact only untruncated).
 
-    The L-curve (``artefacts_['lcurve']``: rank, residual norm ``||y - Z w_r - b_r||``, solution norm
-    ``||w_r||`` on standardised columns, so that it does not depend on units) and the corner are kept.
+    The L-curve (``artefacts_['lcurve']``: rank, residual norm ``||y - Z w_r - b_r||``, solution
+    norm ``||w_r||`` on standardised columns, so that it does not depend on units) and the corner
+    are kept.
 
     Parameters
     ----------
     gamma : float or 'gcv'
-        LS-SVM gamma on standardised columns. Default 1e8: nearly unregularised (1/gamma is tiny against the
-        eigenvalues of ``Z^T Z``, trace n k), so the truncation is the regulariser, as in the seed.
+        LS-SVM gamma on standardised columns. Default 1e8: nearly unregularised (1/gamma is tiny
+        against the eigenvalues of ``Z^T Z``, trace n k), so the truncation is the regulariser, as
+        in the seed.
     rank : 'lcurve' or int
         Number of singular values kept (capped at the number of nontrivial ones).
     bias, max_dual, standardize : as :class:`LSSVM`.
@@ -246,10 +259,11 @@ class TruncatedLSSVM(Estimator):
         return W, np.sqrt(np.maximum(rho2, 0.0))
 
     def _path_dual(self, Z, y, gamma):
-        """TSVD path of the literal LS-SVM matrix. The matrix is symmetric, so its SVD is its eigen-
-        decomposition (singular values |lambda_i|, u_i = sign(lambda_i) v_i): LAPACK's symmetric eigensolver
-        gives the same truncated solutions ``sum v_i (u_i^T rhs) / sigma_i = sum q_i (q_i^T rhs) / lambda_i``
-        three times faster than a general SVD (1.4 s against 4.2 s at n = 2000, one core)."""
+        """TSVD path of the literal LS-SVM matrix. The matrix is symmetric, so its SVD is its
+        eigen- decomposition (singular values |lambda_i|, u_i = sign(lambda_i) v_i): LAPACK's
+        symmetric eigensolver gives the same truncated solutions ``sum v_i (u_i^T rhs) / sigma_i
+        = sum q_i (q_i^T rhs) / lambda_i`` three times faster than a general SVD (1.4 s against
+        4.2 s at n = 2000, one core)."""
         n, k = Z.shape
         M = _dual_matrix(Z, gamma, self.bias)
         m = M.shape[0]
@@ -312,36 +326,40 @@ class OnlineLSSVM(Estimator):
     """Incremental LS-SVM with bias (Du et al. 2016, eqs. 7-21), and its convergence history.
 
     Dual recursion (n <= ``max_dual``), as the seed: start from the first ``n_init`` samples with
-    ``P = Gamma^-1``, ``Gamma(t) = Omega_t + I/gamma`` (eq. 17), add one sample at a time by the block-inverse
-    formula (eqs. 19-21): with ``W = Z_t z_{t+1}``, ``w = z_{t+1}.z_{t+1} + 1/gamma``, ``a = P W``,
-    ``d = w - W^T a``: ``P(t+1) = [[P + a a^T/d, -a/d], [-a^T/d, 1/d]]``; then ``b = e^T P y / e^T P e`` and
-    ``alpha = P (y - e b)`` (eqs. 15-16; without ``bias``: ``alpha = P y``), ``w = Z_t^T alpha``.
-    Memory O(n^2), time O(n^3) in all (7 s at n = 2000 on one core; the seed's 100 samples take 10 ms).
+    ``P = Gamma^-1``, ``Gamma(t) = Omega_t + I/gamma`` (eq. 17), add one sample at a time by the
+    block-inverse formula (eqs. 19-21): with ``W = Z_t z_{t+1}``, ``w = z_{t+1}.z_{t+1} + 1/gamma``,
+    ``a = P W``, ``d = w - W^T a``: ``P(t+1) = [[P + a a^T/d, -a/d], [-a^T/d, 1/d]]``; then ``b =
+    e^T P y / e^T P e`` and ``alpha = P (y - e b)`` (eqs. 15-16; without ``bias``: ``alpha = P y``),
+    ``w = Z_t^T alpha``. Memory O(n^2), time O(n^3) in all (7 s at n = 2000 on one core; the seed's
+    100 samples take 10 ms).
 
-    Primal recursion (n > ``max_dual``): the same solution from running sums of the regularised normal
-    equations, updated sample block by sample block (mean and centred co-moment merged by the pairwise
-    update of Chan, Golub & LeVeque 1979, exact), ``(C_t + I/gamma) w = c_t``, ``b = mean(y) - mean(z) . w``.
-    Memory O(k^2). Both recursions equal the batch :class:`LSSVM` after the last sample (tested).
+    Primal recursion (n > ``max_dual``): the same solution from running sums of the regularised
+    normal equations, updated sample block by sample block (mean and centred co-moment merged by the
+    pairwise update of Chan, Golub & LeVeque 1979, exact), ``(C_t + I/gamma) w = c_t``, ``b =
+    mean(y) - mean(z) . w``. Memory O(k^2). Both recursions equal the batch :class:`LSSVM` after the
+    last sample (tested).
 
-    ``artefacts_['convergence']``: n_samples, then every coefficient (original units; 'intercept' with the
-    bias) after each step (every m-th step when more than ``max_records`` steps, always the last).
-    ``diagnostics_['n_converged']``: the number of samples after which every coefficient stays within 5 %
-    of its final value (at the recorded resolution; the intercept is not included, it may be ~0).
+    ``artefacts_['convergence']``: n_samples, then every coefficient (original units; 'intercept'
+    with the bias) after each step (every m-th step when more than ``max_records`` steps, always the
+    last). ``diagnostics_['n_converged']``: the number of samples after which every coefficient
+    stays within 5 % of its final value (at the recorded resolution; the intercept is not included,
+    it may be ~0).
 
     Parameters
     ----------
     gamma : float
-        LS-SVM gamma on standardised columns (the column scales are those of the whole record: a fixed
-        change of units; online use would fix them beforehand). Default 1e4. An online identifier cannot
-        tune gamma on data it has not seen, so it is fixed, and it has to balance two things:
-        (a) bias: ``1/gamma = 1e-4`` against eigenvalues of ``Z^T Z`` that grow like t (trace t k); a
-        direction carrying a fraction 1e-3 of the standardised variance has eigenvalue ~1e-3 t, so its
-        shrinkage is below 0.1 % after 100 samples and falls like 1/t;
-        (b) precision of the seed's dual recursion, which is numerically fragile: the block-inverse update
-        divides by the Schur complement d ~ 1/gamma once t > k, and rounding errors grow with
-        cond(Gamma) ~ gamma t k. Measured against the batch solution on a 100-sample, 5-column problem with
-        5 % noise: 5e-10 relative at gamma = 1e2, 4e-6 at 1e4, 0.1 at 1e6, meaningless at 1e8 (noise-free:
-        3e-10 at 1e4). The primal recursion has no such problem (1e-11 at every gamma).
+        LS-SVM gamma on standardised columns (the column scales are those of the whole record: a
+        fixed change of units; online use would fix them beforehand). Default 1e4. An online
+        identifier cannot tune gamma on data it has not seen, so it is fixed, and it has to balance
+        two things: (a) bias: ``1/gamma = 1e-4`` against eigenvalues of ``Z^T Z`` that grow like t
+        (trace t k); a direction carrying a fraction 1e-3 of the standardised variance has
+        eigenvalue ~1e-3 t, so its shrinkage is below 0.1 % after 100 samples and falls like 1/t;
+        (b) precision of the seed's dual recursion, which is numerically fragile: the block-inverse
+        update divides by the Schur complement d ~ 1/gamma once t > k, and rounding errors grow with
+        cond(Gamma) ~ gamma t k. Measured against the batch solution on a 100-sample, 5-column
+        problem with 5 % noise: 5e-10 relative at gamma = 1e2, 4e-6 at 1e4, 0.1 at 1e6, meaningless
+        at 1e8 (noise-free: 3e-10 at 1e4). The primal recursion has no such problem (1e-11 at every
+        gamma).
     bias : bool
         Estimate b (default True, as the seed).
     n_init : int

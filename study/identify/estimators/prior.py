@@ -1,20 +1,24 @@
-"""Identification anchored to prior knowledge: the maximum a posteriori estimate under independent normal priors
-on the coefficients (a generalised ridge toward the prior mean, each coefficient with its own width).
+"""Identification anchored to prior knowledge: the maximum a posteriori estimate under independent
+normal priors on the coefficients (a generalised ridge toward the prior mean, each coefficient with
+its own width).
 
-The prior (mean and standard deviation per column) comes from ``study.identify.priors`` (``prior.source`` in the
-estimator config: the vessel config's published set, empirical regressions on the main particulars, or a
-set offset from the truth); ``identify`` passes it to ``fit(X, y, prior=...)``.
+The prior (mean and standard deviation per column) comes from ``study.identify.priors``
+(``prior.source`` in the estimator config: the vessel config's published set, empirical regressions
+on the main particulars, or a set offset from the truth); ``identify`` passes it to ``fit(X, y,
+prior=...)``.
 
-The records enter as their least-squares estimate with its batch-means (block cluster-robust) covariance: rows
-of a manoeuvre sampled many times a second are far from independent, and counting every row as one would let any
-misfit, model error included, overrule the prior, while a short-lag HAC kernel misses the cancellation of
-differentiated noise and undervalues the records several times over (see :func:`data_covariance`).
-Assumption labelled: the prior's coefficients independent of each other.
+The records enter as their least-squares estimate with its batch-means (block cluster-robust)
+covariance: rows of a manoeuvre sampled many times a second are far from independent, and counting
+every row as one would let any misfit, model error included, overrule the prior, while a short-lag
+HAC kernel misses the cancellation of differentiated noise and undervalues the records several times
+over (see :func:`data_covariance`). Assumption labelled: the prior's coefficients independent of
+each other.
 
-What it reports per coefficient (``coef_std_``, ``coef_interval_``, ``identifiability_``): the posterior
-standard deviation, the normal 90 % interval, and the ratio of posterior to prior standard deviation: near 0
-when the records determine the coefficient, near 1 when they leave it where the prior put it. A prior the
-records contradict beyond its stated width is widened by the evidence (``prior_widening``, :func:`prior_widening`).
+What it reports per coefficient (``coef_std_``, ``coef_interval_``, ``identifiability_``): the
+posterior standard deviation, the normal 90 % interval, and the ratio of posterior to prior standard
+deviation: near 0 when the records determine the coefficient, near 1 when they leave it where the
+prior put it. A prior the records contradict beyond its stated width is widened by the evidence
+(``prior_widening``, :func:`prior_widening`).
 """
 from __future__ import annotations
 
@@ -28,7 +32,8 @@ RHO_MAX = 0.999
 
 
 def effective_rows(resid: np.ndarray) -> tuple[float, float]:
-    """(effective number of independent rows, lag-one autocorrelation) of a residual series, AR(1) assumed."""
+    """(effective number of independent rows, lag-one autocorrelation) of a residual series,
+    AR(1) assumed."""
     a = np.asarray(resid, float) - float(np.mean(resid))
     den = float(np.dot(a, a))
     rho = float(np.dot(a[1:], a[:-1])) / den if den > 0 and len(a) > 2 else 0.0
@@ -41,23 +46,26 @@ DATA_BLOCKS = 30
 
 
 def data_blocks(n: int, k: int) -> int:
-    """Number of consecutive blocks for :func:`data_covariance`: 30, at least three per coefficient, at most one
-    per five rows."""
+    """Number of consecutive blocks for :func:`data_covariance`: 30, at least three per
+    coefficient, at most one per five rows."""
     return int(max(2, min(max(DATA_BLOCKS, 3 * k), n // 5)))
 
 
 def data_covariance(Z: np.ndarray, y: np.ndarray):
-    """(least-squares estimate, its covariance, number of blocks) of ``y = Z theta + e``, rows in time order.
+    """(least-squares estimate, its covariance, number of blocks) of ``y = Z theta + e``, rows in
+    time order.
 
-    The covariance is the cluster-robust sandwich with the rows cut into consecutive blocks ("batch means";
-    statsmodels' ``cov_type='cluster'``): the score summed over a block keeps every correlation inside it, of
-    either sign and of any length up to the block's. Why not a Newey-West (Bartlett) kernel: central differences
-    of white noise are correlated at lag 2 with coefficient -0.5 and cancel almost exactly when summed, which a
-    down-weighted kernel cannot see; with it the standard errors of simulated KCS and KVLCC2 MMG hulls (8 seeds,
-    1 % noise) were 7-9 times the actual spread of the estimates over seeds. With 30 blocks they are 1.1-1.3 times
-    (KVLCC2 1.08, KCS 1.31; 15 blocks 1.24, 100 blocks 1.56, 300 blocks 2.36 on KCS: each block boundary adds a
-    term that a whole record does not have, so more blocks overstate the variance). Blocks as long as a few
-    tens of seconds also keep the slow correlation of a model error, which then counts for few rows.
+    The covariance is the cluster-robust sandwich with the rows cut into consecutive blocks ("batch
+    means"; statsmodels' ``cov_type='cluster'``): the score summed over a block keeps every
+    correlation inside it, of either sign and of any length up to the block's. Why not a Newey-West
+    (Bartlett) kernel: central differences of white noise are correlated at lag 2 with coefficient
+    -0.5 and cancel almost exactly when summed, which a down-weighted kernel cannot see; with it the
+    standard errors of simulated KCS and KVLCC2 MMG hulls (8 seeds, 1 % noise) were 7-9 times the
+    actual spread of the estimates over seeds. With 30 blocks they are 1.1-1.3 times (KVLCC2 1.08,
+    KCS 1.31; 15 blocks 1.24, 100 blocks 1.56, 300 blocks 2.36 on KCS: each block boundary adds a
+    term that a whole record does not have, so more blocks overstate the variance). Blocks as long
+    as a few tens of seconds also keep the slow correlation of a model error, which then counts for
+    few rows.
     """
     import statsmodels.api as sm
 
@@ -73,14 +81,16 @@ PRIOR_SCALE_MAX = 1e6  # effectively unbounded: records may discard a prior they
 
 
 def prior_widening(d: np.ndarray, V: np.ndarray, sd0: np.ndarray, top: float = PRIOR_SCALE_MAX) -> float:
-    """The factor ``tau >= 1`` on the prior's standard deviations that makes the records' least-squares estimate
-    most likely (type-II maximum likelihood, "empirical Bayes"): ``d = ls - mean0 ~ N(0, V + tau^2 diag(sd0^2))``.
+    """The factor ``tau >= 1`` on the prior's standard deviations that makes the records'
+    least-squares estimate most likely (type-II maximum likelihood, "empirical Bayes"): ``d = ls -
+    mean0 ~ N(0, V + tau^2 diag(sd0^2))``.
 
-    Why: a prior is somebody's claim (a published set from another basin, a regression over other hulls, a
-    derived linearisation). Where the records contradict it beyond its stated width, keeping it at that width
-    drags the well-determined coefficients towards a wrong value; the evidence widens it instead. Never narrower
-    than stated (``tau >= 1``): the records cannot make prior knowledge more certain than its source says.
-    Coefficients with a flat prior (``sd0 = inf``) take no part.
+    Why: a prior is somebody's claim (a published set from another basin, a regression over other
+    hulls, a derived linearisation). Where the records contradict it beyond its stated width,
+    keeping it at that width drags the well-determined coefficients towards a wrong value; the
+    evidence widens it instead. Never narrower than stated (``tau >= 1``): the records cannot make
+    prior knowledge more certain than its source says. Coefficients with a flat prior (``sd0 =
+    inf``) take no part.
     """
     from scipy.optimize import minimize_scalar
 
@@ -103,16 +113,18 @@ def prior_widening(d: np.ndarray, V: np.ndarray, sd0: np.ndarray, top: float = P
 
 def gaussian_posterior(X: np.ndarray, y: np.ndarray, mean0: np.ndarray, sd0: np.ndarray, widen: bool = True,
                        eiv=None):
-    """(posterior mean, posterior covariance, diagnostics) of y = X theta + e under theta ~ N(mean0, sd0^2).
+    """(posterior mean, posterior covariance, diagnostics) of y = X theta + e under theta ~ N(mean0,
+    sd0^2).
 
     The records' information is the least-squares estimate with its block cluster-robust covariance
-    (:func:`data_covariance`), combined with the normal prior as a Gaussian likelihood of theta: the "sandwich"
-    posterior of Mueller (2013, Econometrica 81, 1805-1849), which stays honest when the rows are autocorrelated
-    (positively: smoothed states and model error count for fewer rows; negatively: central differences of white
-    noise cancel) or the model is misspecified. With ``widen`` the prior's standard deviations are first scaled
-    by :func:`prior_widening` (1 when the records agree with the prior; reported as ``prior_widening``).
-    ``eiv``: the errors-in-variables terms of the rows (``study.identify.row_errors.Correction``): the records'
-    estimate is then the corrected least-squares one (:func:`corrected_least_squares`).
+    (:func:`data_covariance`), combined with the normal prior as a Gaussian likelihood of theta: the
+    "sandwich" posterior of Mueller (2013, Econometrica 81, 1805-1849), which stays honest when the
+    rows are autocorrelated (positively: smoothed states and model error count for fewer rows;
+    negatively: central differences of white noise cancel) or the model is misspecified. With
+    ``widen`` the prior's standard deviations are first scaled by :func:`prior_widening` (1 when the
+    records agree with the prior; reported as ``prior_widening``). ``eiv``: the errors-in-variables
+    terms of the rows (``study.identify.row_errors.Correction``): the records' estimate is then the
+    corrected least-squares one (:func:`corrected_least_squares`).
     """
     n, k = X.shape
     s = np.sqrt(np.mean(X * X, axis=0))
@@ -139,16 +151,18 @@ def gaussian_posterior(X: np.ndarray, y: np.ndarray, mean0: np.ndarray, sd0: np.
 
 
 def corrected_least_squares(Z: np.ndarray, y: np.ndarray, ls: np.ndarray, eiv, s: np.ndarray):
-    """(estimate, covariance, diagnostics) of the corrected least squares of rows ``Z`` (columns scaled by ``s``)
-    whose regressors are noisy: ``(Z'Z - M) theta = Z'y - g`` (``study.identify.row_errors``: Fuller 1987 Sec.
-    2.2). Its covariance is the block cluster-robust sandwich of the corrected score, each block's
-    ``Z_b' (y_b - Z_b theta) - (n_b / n) (g - M theta)`` at the corrected estimate (the blocks of
-    :func:`data_covariance`, with statsmodels' small-sample factor), plus the probes' Monte Carlo error. Why not the
-    least-squares sandwich: its residuals at the biased estimate carry the bias as a slow misfit, which the blocks
-    count as correlated noise (measured on synthetic rows of reliability 0.86: 2.6 times the actual spread).
-    ``eiv_reliability_min``: the smallest eigenvalue of ``H^-1/2 (H - M) H^-1/2`` (1: the regressors' noise
-    negligible; near 0 or below: the noise is the signal, and the first-order correction is no longer valid; below
-    ``row_errors.RELIABILITY_MIN`` it is not made: None)."""
+    """(estimate, covariance, diagnostics) of the corrected least squares of rows ``Z`` (columns
+    scaled by ``s``) whose regressors are noisy: ``(Z'Z - M) theta = Z'y - g``
+    (``study.identify.row_errors``: Fuller 1987 Sec. 2.2). Its covariance is the block
+    cluster-robust sandwich of the corrected score, each block's ``Z_b' (y_b - Z_b theta) - (n_b
+    / n) (g - M theta)`` at the corrected estimate (the blocks of :func:`data_covariance`, with
+    statsmodels' small-sample factor), plus the probes' Monte Carlo error. Why not the
+    least-squares sandwich: its residuals at the biased estimate carry the bias as a slow misfit,
+    which the blocks count as correlated noise (measured on synthetic rows of reliability 0.86:
+    2.6 times the actual spread). ``eiv_reliability_min``: the smallest eigenvalue of ``H^-1/2 (H
+    - M) H^-1/2`` (1: the regressors' noise negligible; near 0 or below: the noise is the signal,
+    and the first-order correction is no longer valid; below ``row_errors.RELIABILITY_MIN`` it is
+    not made: None)."""
     from ..row_errors import RELIABILITY_MIN
 
     M, g = eiv.M / np.outer(s, s), eiv.g / s
@@ -180,11 +194,12 @@ def gls_posterior(X: np.ndarray, y: np.ndarray, operators, mean0: np.ndarray, sd
                   q_raw: np.ndarray | None = None, errors=None):
     """(posterior mean, covariance, diagnostics, noise model) of ``y = X theta + e`` under
     ``theta ~ N(mean0, sd0^2)``, with the rows' noise modelled by the structure's operators
-    (``study.identify.row_noise``, ``operators`` a ``RowOperators``): the noise model fitted by maximum likelihood
-    (or ``q_raw`` taken as given), the rows whitened, and the MAP estimator's sandwich posterior
-    (:func:`gaussian_posterior`, prior not widened) of the whitened rows. ``errors``: the rows' truncation and
-    the regressors' noise (``study.identify.row_errors.RowErrors``), removed: the truncation from the rows before
-    the noise model is fitted, the regressors' noise by corrected least squares on the whitened rows."""
+    (``study.identify.row_noise``, ``operators`` a ``RowOperators``): the noise model fitted by
+    maximum likelihood (or ``q_raw`` taken as given), the rows whitened, and the MAP estimator's
+    sandwich posterior (:func:`gaussian_posterior`, prior not widened) of the whitened rows.
+    ``errors``: the rows' truncation and the regressors' noise
+    (``study.identify.row_errors.RowErrors``), removed: the truncation from the rows before the
+    noise model is fitted, the regressors' noise by corrected least squares on the whitened rows."""
     from ..row_errors import eiv_terms
     from ..row_noise import RowNoise
 
@@ -222,13 +237,15 @@ class MapEstimator(Estimator):
     Parameters
     ----------
     prior : dict
-        ``{source: vessel|empirical|offset, sd: relative standard deviation, offset: for source offset}``;
-        read by ``study.identify.fit.identify``, which hands the resolved prior to :meth:`fit`.
+        ``{source: vessel|empirical|offset, sd: relative standard deviation, offset: for source
+        offset}``; read by ``study.identify.fit.identify``, which hands the resolved prior to
+        :meth:`fit`.
     interval : float
         level of the reported interval (normal, from the posterior covariance).
     widen_prior : bool
-        let the records widen a prior they contradict (:func:`prior_widening`); the factor is reported as the
-        diagnostic ``prior_widening`` and the identifiability is measured against the widened prior.
+        let the records widen a prior they contradict (:func:`prior_widening`); the factor is
+        reported as the diagnostic ``prior_widening`` and the identifiability is measured against
+        the widened prior.
     """
 
     accepts_prior = True
@@ -240,7 +257,8 @@ class MapEstimator(Estimator):
         self.widen_prior = widen_prior
 
     def skip(self, model, structure):
-        """Also skipped: an empirical prior for a model the regressions do not cover (MMG hulls only)."""
+        """Also skipped: an empirical prior for a model the regressions do not cover (MMG hulls
+        only)."""
         skip, why = super().skip(model, structure)
         if skip:
             return skip, why

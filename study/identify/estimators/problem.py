@@ -1,8 +1,9 @@
 """The regression problem an estimator is handed (:meth:`.base.Estimator.fit_problem`).
 
-One equation of a model, ``y = X theta + e``, with what the run knows about it: the prior of its coefficients and,
-for an estimator that models the rows' noise, the structure's noise operators and the rows' errors. The
-output-error problem is :class:`study.identify.output_error.OutputErrorProblem`.
+One equation of a model, ``y = X theta + e``, with what the run knows about it: the prior of its
+coefficients and, for an estimator that models the rows' noise, the structure's noise operators and
+the rows' errors. The output-error problem is
+:class:`study.identify.output_error.OutputErrorProblem`.
 """
 from __future__ import annotations
 
@@ -32,8 +33,9 @@ class RegressionProblem:
     equation : str
         The equation's name, for messages.
     neighbours : pandas.DataFrame or None
-        Terms the model lacks (its states' monomials, ``Model.candidates``), built by the same structure on the
-        same training rows: what an estimator that checks its model (``checks_omitted_terms``) tests it against.
+        Terms the model lacks (its states' monomials, ``Model.candidates``), built by the same
+        structure on the same training rows: what an estimator that checks its model
+        (``checks_omitted_terms``) tests it against.
     """
 
     X: pd.DataFrame

@@ -1,4 +1,5 @@
-"""Sparse regression among the given regressors: SINDy's sequentially thresholded least squares (pysindy)."""
+"""Sparse regression among the given regressors: SINDy's sequentially thresholded least squares
+(pysindy)."""
 from __future__ import annotations
 
 import warnings
@@ -11,29 +12,32 @@ from .linear import check_regression, column_scale, contiguous_folds, rms
 
 
 class SINDy(Estimator):
-    """Sparse identification (SINDy; Brunton, Proctor & Kutz 2016, PNAS) by pysindy's optimizers on the regressors.
+    """Sparse identification (SINDy; Brunton, Proctor & Kutz 2016, PNAS) by pysindy's optimizers on
+    the regressors.
 
-    The library is the columns of X (the lead adds candidate terms there); the optimizer selects among them.
-    ``STLSQ`` (sequentially thresholded least squares, Brunton et al. 2016) by default, ``SR3`` (sparse
-    relaxed regularised regression, Zheng et al. 2019; L0 penalty ``threshold^2 / 2``) as an option. pysindy's
-    final unbiasing step re-estimates the kept terms by least squares (``unbias=True``).
+    The library is the columns of X (the lead adds candidate terms there); the optimizer selects
+    among them. ``STLSQ`` (sequentially thresholded least squares, Brunton et al. 2016) by default,
+    ``SR3`` (sparse relaxed regularised regression, Zheng et al. 2019; L0 penalty ``threshold^2 /
+    2``) as an option. pysindy's final unbiasing step re-estimates the kept terms by least squares
+    (``unbias=True``).
 
-    Scaling: columns *and* y are divided by their root mean square inside ``fit`` (not centred; no intercept)
-    and the coefficients mapped back. The threshold is therefore relative: term j is dropped when
-    ``|theta_j| * rms(x_j) < threshold * rms(y)``, i.e. when its standardised contribution is below that
-    fraction of y. The STLSQ ridge ``alpha`` is relative too (multiplied by n: compared with the
-    eigenvalues of ``Z^T Z / n``).
+    Scaling: columns *and* y are divided by their root mean square inside ``fit`` (not centred; no
+    intercept) and the coefficients mapped back. The threshold is therefore relative: term j is
+    dropped when ``|theta_j| * rms(x_j) < threshold * rms(y)``, i.e. when its standardised
+    contribution is below that fraction of y. The STLSQ ridge ``alpha`` is relative too (multiplied
+    by n: compared with the eigenvalues of ``Z^T Z / n``).
 
     Threshold rule (``threshold='cv'``): each value of ``thresholds`` is scored by contiguous K-fold
-    cross-validation (``KFold`` without shuffling, against the autocorrelation of manoeuvre samples).
-    ``select='min'`` (default): the smallest mean validation error; ties (equal errors, i.e. thresholds that
-    keep the same terms) go to the larger threshold. ``select='1se'``: the largest threshold whose mean validation error
-    is within one standard error of the best (Breiman et al. 1984; Hastie, Tibshirani & Friedman 2009 sec.
-    7.10), the sparsest model the folds cannot tell from the best. With contiguous folds the fold-to-fold
-    spread is large (different manoeuvres), so '1se' is aggressive: on noise-free ship regressions it drops
-    true terms contributing 0.2-0.7 % of y (USV N'vrr, N'vvr, measured), which 'min' keeps. Even a 1 %
-    tolerance on 'min' drops the linear r of a noisy nonlinear Nomoto model (r and r^3 collinear, 0.35 %
-    worse without r), leaving T undefined. A number fixes the threshold.
+    cross-validation (``KFold`` without shuffling, against the autocorrelation of manoeuvre
+    samples). ``select='min'`` (default): the smallest mean validation error; ties (equal errors,
+    i.e. thresholds that keep the same terms) go to the larger threshold. ``select='1se'``: the
+    largest threshold whose mean validation error is within one standard error of the best (Breiman
+    et al. 1984; Hastie, Tibshirani & Friedman 2009 sec. 7.10), the sparsest model the folds cannot
+    tell from the best. With contiguous folds the fold-to-fold spread is large (different
+    manoeuvres), so '1se' is aggressive: on noise-free ship regressions it drops true terms
+    contributing 0.2-0.7 % of y (USV N'vrr, N'vvr, measured), which 'min' keeps. Even a 1 %
+    tolerance on 'min' drops the linear r of a noisy nonlinear Nomoto model (r and r^3 collinear,
+    0.35 % worse without r), leaving T undefined. A number fixes the threshold.
 
     Parameters
     ----------
@@ -47,8 +51,8 @@ class SINDy(Estimator):
         How 'cv' picks among the thresholds.
     optimizer : 'stlsq' | 'sr3'
     alpha : float
-        Relative ridge of STLSQ's inner regressions (tiny by default: plain thresholded least squares, with
-        just enough ridge to keep the solve defined on collinear columns).
+        Relative ridge of STLSQ's inner regressions (tiny by default: plain thresholded least
+        squares, with just enough ridge to keep the solve defined on collinear columns).
     max_iter : int
         Optimizer iterations.
     """

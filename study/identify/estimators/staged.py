@@ -1,22 +1,23 @@
-"""Step-by-step identification by differential evolution on the output error: Zou et al.'s method, the comparator
-of Zheng & Xiao (2017, Sec. 3.1).
+"""Step-by-step identification by differential evolution on the output error: Zou et al.'s method,
+the comparator of Zheng & Xiao (2017, Sec. 3.1).
 
-Zheng & Xiao (2017) identify every parameter of the nonlinear KT model at once from several records ("parallel
-processing", :class:`.evolution.DifferentialEvolution`) and set it against the step-by-step method of their
-reference [3] (Zou et al.), which they quote:
+Zheng & Xiao (2017) identify every parameter of the nonlinear KT model at once from several records
+("parallel processing", :class:`.evolution.DifferentialEvolution`) and set it against the
+step-by-step method of their reference [3] (Zou et al.), which they quote:
 
 1. K from a turning test at a small rudder angle;
 2. with K fixed, alpha from a turning test at a large rudder angle;
 3. with K and alpha fixed, T (T1, T2, T3) from a zigzag at a large rudder angle.
 
-:class:`StagedEvolution` runs those stages on the same records the parallel fit uses. Each stage is an output-error
-fit by differential evolution on the records it names (their indices in the run's training manoeuvres, in order)
-of every parameter not kept by an earlier stage nor held by this one (``hold``: values for this stage only); it
-then keeps the parameters it names (``keep``), and the last stage keeps everything. Stage 1 holds alpha at zero
-(a small-rudder turn is taken as linear: one steady turn cannot tell K from alpha, K delta = r + alpha r^3) and
-fits T on the turn as a nuisance, keeping only K. Assumption (labelled): the quoted steps do not say how K is read
-from the turn; here it is the output-error fit of the turn's heading, the same fit the parallel method uses, so
-that the two differ only in staging.
+:class:`StagedEvolution` runs those stages on the same records the parallel fit uses. Each stage is
+an output-error fit by differential evolution on the records it names (their indices in the run's
+training manoeuvres, in order) of every parameter not kept by an earlier stage nor held by this one
+(``hold``: values for this stage only); it then keeps the parameters it names (``keep``), and the
+last stage keeps everything. Stage 1 holds alpha at zero (a small-rudder turn is taken as linear:
+one steady turn cannot tell K from alpha, K delta = r + alpha r^3) and fits T on the turn as a
+nuisance, keeping only K. Assumption (labelled): the quoted steps do not say how K is read from the
+turn; here it is the output-error fit of the turn's heading, the same fit the parallel method uses,
+so that the two differ only in staging.
 """
 from __future__ import annotations
 
@@ -34,7 +35,8 @@ ZOU_STAGES = ({"records": [0], "hold": {"alpha": 0.0}, "keep": ["K"]}, {"records
 
 
 def _restricted(problem, segments: list):
-    """A copy of an output-error problem over some of its segments (its initial-state parameters with them)."""
+    """A copy of an output-error problem over some of its segments (its initial-state parameters
+    with them)."""
     sub = copy.copy(problem)
     sub.segments = [problem.segments[i] for i in segments]
     where = {old: new for new, old in enumerate(segments)}
@@ -50,9 +52,9 @@ def _restricted(problem, segments: list):
 
 
 class _Fixed:
-    """An output-error problem with some model parameters held: the interface :func:`local_fit` and DE use
-    (``k``, ``bounds``, ``cost``, ``residuals``, ``last_diverged``, ``n_total``, ``polish_skipped``), over the
-    free parameters only."""
+    """An output-error problem with some model parameters held: the interface :func:`local_fit`
+    and DE use (``k``, ``bounds``, ``cost``, ``residuals``, ``last_diverged``, ``n_total``,
+    ``polish_skipped``), over the free parameters only."""
 
     def __init__(self, problem, free: list, held: dict):
         self.problem, self.free = problem, free
@@ -82,14 +84,17 @@ class _Fixed:
 
 
 class StagedEvolution(DifferentialEvolution):
-    """Differential evolution in stages (Zou et al.'s step-by-step identification), output error only.
+    """Differential evolution in stages (Zou et al.'s step-by-step identification), output error
+    only.
 
     Parameters
     ----------
     stages : list of dict
-        Each ``{"records": [i, ...], "hold": {name: value}, "keep": [name, ...]}``: the training records
-        (indices, in the order of the run's training manoeuvres) the stage fits, parameters held at a value in
-        this stage only, and the model parameters it fixes for the stages after it (the last stage fixes all). Default: Zou et al.'s three steps for (small turn, large turn, large zigzag).
+        Each ``{"records": [i, ...], "hold": {name: value}, "keep": [name, ...]}``: the training
+        records (indices, in the order of the run's training manoeuvres) the stage fits, parameters
+        held at a value in this stage only, and the model parameters it fixes for the stages after
+        it (the last stage fixes all). Default: Zou et al.'s three steps for (small turn, large
+        turn, large zigzag).
     **kwargs
         :class:`.evolution.DifferentialEvolution`'s hyper-parameters, used in every stage.
     """

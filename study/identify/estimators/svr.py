@@ -1,11 +1,13 @@
-"""Support vector regression with a linear kernel: epsilon-SVR and nu-SVR (libsvm, or the primal QP by Clarabel).
+"""Support vector regression with a linear kernel: epsilon-SVR and nu-SVR (libsvm, or the primal QP
+by Clarabel).
 
-Song et al. (2025) identifies the MMG coefficients by a linear-kernel epsilon-SVR and reads them from
-the weights ``w = sum (alpha_i - alpha_i^*) x_i`` (its eq. 26), when the bias b is near 0. scikit-learn's
-``SVR`` / ``NuSVR`` (libsvm; Chang & Lin 2011) give exactly that as ``coef_``, but libsvm's dual solver is
-slow at the benchmark size: on 16,800 samples with a small epsilon nearly every sample is a support vector
-(9 s at C = 1, 200 s at C = 100 for 5 columns). The linear SVR is also a small *primal* quadratic programme
-(k + 1 + n variables, 3n inequalities, sparse), which the interior-point solver Clarabel (Goulart & Chen
+Song et al. (2025) identifies the MMG coefficients by a linear-kernel epsilon-SVR and reads them
+from the weights ``w = sum (alpha_i - alpha_i^*) x_i`` (its eq. 26), when the bias b is near 0.
+scikit-learn's ``SVR`` / ``NuSVR`` (libsvm; Chang & Lin 2011) give exactly that as ``coef_``, but
+libsvm's dual solver is slow at the benchmark size: on 16,800 samples with a small epsilon nearly
+every sample is a support vector (9 s at C = 1, 200 s at C = 100 for 5 columns). The linear SVR is
+also a small *primal* quadratic programme (k + 1 + n variables, 3n inequalities, sparse), which the
+interior-point solver Clarabel (Goulart & Chen
 2024) solves in well under a second at n = 16,800, with the same optimum (tested against libsvm).
 """
 from __future__ import annotations
@@ -31,15 +33,16 @@ def _scale(X, y):
 
 
 def _qp_svr(Z, y, C, epsilon=None, nu=None, intercept=True):
-    """Primal linear SVR by Clarabel. ``epsilon`` given: eps-SVR; ``nu`` given: nu-SVR (eps a variable).
+    """Primal linear SVR by Clarabel. ``epsilon`` given: eps-SVR; ``nu`` given: nu-SVR (eps a
+    variable).
 
     eps-SVR (Vapnik 1995; Smola & Schoelkopf 2004):  min 1/2 |w|^2 + C sum t_i
         s.t.  |y_i - z_i.w - b| <= eps + t_i,  t_i >= 0        (t_i = xi_i + xi_i^*; one of them is 0)
     nu-SVR (Schoelkopf et al. 2000), scaled as libsvm solves it (Chang & Lin 2011, sec. 2.4):
         min 1/2 |w|^2 + C (n nu eps + sum t_i)   s.t. |y_i - z_i.w - b| <= eps + t_i,  t_i >= 0, eps >= 0
-    Variables [w (k), b (if ``intercept``), t (n)] (+ eps). Returns w, b (0 without intercept), eps (nu-SVR)
-    and Clarabel's status. Written by hand (the formulation; the solving is Clarabel's): no library poses the
-    linear SVR as its primal QP.
+    Variables [w (k), b (if ``intercept``), t (n)] (+ eps). Returns w, b (0 without intercept), eps
+    (nu-SVR) and Clarabel's status. Written by hand (the formulation; the solving is Clarabel's): no
+    library poses the linear SVR as its primal QP.
     """
     import clarabel
 
@@ -111,33 +114,37 @@ class _LinearSVR(Estimator):
 
 
 class EpsilonSVR(_LinearSVR):
-    """epsilon-SVR with a linear kernel (Vapnik 1995; Smola & Schoelkopf 2004), as Song et al. (2025).
+    """epsilon-SVR with a linear kernel (Vapnik 1995; Smola & Schoelkopf 2004), as Song et al.
+    (2025).
 
     Columns are standardised inside ``fit`` (divided by their root mean square) and y divided by its
-    standard deviation; the coefficients are the weights ``w`` (Song et al. (2025) eq. 26; sklearn's ``coef_``) mapped
-    back to the units of X and y. The model has an intercept b (SVR always does): it is reported as
-    ``intercept_`` and, divided by std(y), as ``diagnostics_['intercept_rel']``; Song et al. (2025) reads the
-    coefficients "when b is near 0" -- b is not forced to 0 here, so a large ``intercept_rel`` flags a fit
-    whose coefficients are not the model's. That happens when a regressor is nearly constant (u^2 in a surge
-    equation at steady speed): b is unpenalised while |w|^2 is, so the SVR moves that term into b (measured on
-    the USV surge equation, noise-free: b = -10 std(y), coefficients off by 260 %). ``fit_intercept=False``
-    (QP only; libsvm always has b) fits the model as it is, without b.
+    standard deviation; the coefficients are the weights ``w`` (Song et al. (2025) eq. 26; sklearn's
+    ``coef_``) mapped back to the units of X and y. The model has an intercept b (SVR always does):
+    it is reported as ``intercept_`` and, divided by std(y), as ``diagnostics_['intercept_rel']``;
+    Song et al. (2025) reads the coefficients "when b is near 0" -- b is not forced to 0 here, so a
+    large ``intercept_rel`` flags a fit whose coefficients are not the model's. That happens when a
+    regressor is nearly constant (u^2 in a surge equation at steady speed): b is unpenalised while
+    |w|^2 is, so the SVR moves that term into b (measured on the USV surge equation, noise-free: b =
+    -10 std(y), coefficients off by 260 %). ``fit_intercept=False`` (QP only; libsvm always has b)
+    fits the model as it is, without b.
 
     The tube biases noise-free fits: the minimum-norm weights inside the tube leave weak (collinear)
-    directions free, by an amount proportional to epsilon (measured on the noise-free ship regressions,
-    largest error relative to the largest coefficient: epsilon = 0.01 -> 7-63 %, 1e-3 -> 0.8-6 %, 1e-4 ->
-    0.03-0.6 %). With realistic noise (above 1e-3 std(y)) almost every sample is outside the tube whatever
-    epsilon, and it hardly matters. Default 1e-4: unbiased on clean data, an eps-SVR (LAD-like) on noisy data.
+    directions free, by an amount proportional to epsilon (measured on the noise-free ship
+    regressions, largest error relative to the largest coefficient: epsilon = 0.01 -> 7-63 %, 1e-3
+    -> 0.8-6 %, 1e-4 -> 0.03-0.6 %). With realistic noise (above 1e-3 std(y)) almost every sample is
+    outside the tube whatever epsilon, and it hardly matters. Default 1e-4: unbiased on clean data,
+    an eps-SVR (LAD-like) on noisy data.
 
     Parameters
     ----------
     C : float
         Penalty on the slacks, on standardised data (libsvm's C: multiplies the *sum* of slacks).
     epsilon : float
-        Half-width of the insensitive tube relative to the spread of y: ``0.01`` means ``0.01 * std(y)``.
+        Half-width of the insensitive tube relative to the spread of y: ``0.01`` means ``0.01 *
+        std(y)``.
     solver : 'auto' | 'libsvm' | 'qp'
-        libsvm (sklearn ``SVR``, the reference dual solver), or the primal QP by Clarabel (``_qp_svr``);
-        'auto': libsvm up to 1000 samples and C <= 10, the QP otherwise.
+        libsvm (sklearn ``SVR``, the reference dual solver), or the primal QP by Clarabel
+        (``_qp_svr``); 'auto': libsvm up to 1000 samples and C <= 10, the QP otherwise.
     tol : float
         libsvm's stopping tolerance (sklearn's default is 1e-3; smaller agrees better with the QP).
     fit_intercept : bool
@@ -177,13 +184,15 @@ class EpsilonSVR(_LinearSVR):
 
 
 class NuSVR(_LinearSVR):
-    """nu-SVR with a linear kernel (Schoelkopf et al. 2000; Smola & Schoelkopf 2004): the tube width is learned.
+    """nu-SVR with a linear kernel (Schoelkopf et al. 2000; Smola & Schoelkopf 2004): the tube width
+    is learned.
 
-    ``nu`` in (0, 1] bounds the fraction of samples outside the tube from above and the fraction of support
-    vectors from below. Scaling, coefficients (the weights w) and intercept (and its trade with nearly
-    constant regressors) as :class:`EpsilonSVR`; the learned tube half-width (relative to std(y)) is
-    ``diagnostics_['epsilon']`` (QP). On noise-free data the tube shrinks to 0 and the fit is exact. The QP is
-    libsvm's scaled primal ``min 1/2 |w|^2 + C (n nu eps + sum(xi + xi*))`` so that C means the same in both
+    ``nu`` in (0, 1] bounds the fraction of samples outside the tube from above and the fraction of
+    support vectors from below. Scaling, coefficients (the weights w) and intercept (and its trade
+    with nearly constant regressors) as :class:`EpsilonSVR`; the learned tube half-width (relative
+    to std(y)) is ``diagnostics_['epsilon']`` (QP). On noise-free data the tube shrinks to 0 and the
+    fit is exact. The QP is libsvm's scaled primal ``min 1/2 |w|^2 + C (n nu eps + sum(xi + xi*))``
+    so that C means the same in both
     solvers.
 
     Parameters

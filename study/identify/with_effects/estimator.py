@@ -1,16 +1,17 @@
-"""The estimator of a force model with effects (``model.effects=[current, ...]``): variable projection
-(:func:`.search.fit`) behind the estimators' contract (``study.identify.estimators.base``).
+"""The estimator of a force model with effects (``model.effects=[current, ...]``): variable
+projection (:func:`.search.fit`) behind the estimators' contract
+(``study.identify.estimators.base``).
 
-Its problem is a :class:`ModelWithEffects`: an :class:`~.problem.EffectsProblem` (the records, the model and the
-effects' catalogue) and the effects to identify. The rows depend on the effects' nonlinear parameters, so the
-problem is no regression problem: the estimator declares the problem type ``"effects"`` and
-``Estimator.fit_problem`` hands it to :meth:`VariableProjection.fit_effects`.
+Its problem is a :class:`ModelWithEffects`: an :class:`~.problem.EffectsProblem` (the records, the
+model and the effects' catalogue) and the effects to identify. The rows depend on the effects'
+nonlinear parameters, so the problem is no regression problem: the estimator declares the problem
+type ``"effects"`` and ``Estimator.fit_problem`` hands it to :meth:`VariableProjection.fit_effects`.
 
 It is the one way a model with effects is identified: a study run (``study.identify.fit``, through
-``fit_problem``) and the model doctor (its ranking, ladder, folds and refits, through :func:`identify_effects`)
-both come to :meth:`VariableProjection.fit_effects`. The doctor fits one problem many times; the problem keeps its
-caches (rows, replays) between fits, and ``fit_effects``'s ``start``, ``grid`` and ``fixed`` carry a warm start
-from one fit to the next.
+``fit_problem``) and the model doctor (its ranking, ladder, folds and refits, through
+:func:`identify_effects`) both come to :meth:`VariableProjection.fit_effects`. The doctor fits one
+problem many times; the problem keeps its caches (rows, replays) between fits, and ``fit_effects``'s
+``start``, ``grid`` and ``fixed`` carry a warm start from one fit to the next.
 """
 from __future__ import annotations
 
@@ -28,7 +29,8 @@ from .search import Fit
 
 @dataclass(frozen=True)
 class ModelWithEffects:
-    """The problem of the problem type ``"effects"``: an :class:`EffectsProblem` and the effects to identify.
+    """The problem of the problem type ``"effects"``: an :class:`EffectsProblem` and the effects to
+    identify.
 
     Attributes
     ----------
@@ -46,10 +48,10 @@ class ModelWithEffects:
 class VariableProjection(Estimator):
     """Variable projection (Golub & Pereyra 1973) of a force model with effects.
 
-    For given values of the effects' nonlinear parameters every linear unknown (the model's free coefficients,
-    the effects' linear parameters) follows by least squares over X, Y and N together; the nonlinear parameters
-    are searched (a grid, then a bounded Nelder-Mead search on the equation error) and, with ``refine``, polished
-    on the training records' replay error.
+    For given values of the effects' nonlinear parameters every linear unknown (the model's free
+    coefficients, the effects' linear parameters) follows by least squares over X, Y and N together;
+    the nonlinear parameters are searched (a grid, then a bounded Nelder-Mead search on the equation
+    error) and, with ``refine``, polished on the training records' replay error.
 
     Parameters
     ----------
@@ -61,8 +63,8 @@ class VariableProjection(Estimator):
     Attributes
     ----------
     coef_ : ndarray
-        The estimate of each name in ``names_``: the effects' parameters in the user's terms (current as speed
-        and direction, ...) and the free coefficients.
+        The estimate of each name in ``names_``: the effects' parameters in the user's terms
+        (current as speed and direction, ...) and the free coefficients.
     names_ : list of str
         The names of ``coef_``.
     equations_ : dict
@@ -91,9 +93,10 @@ class VariableProjection(Estimator):
                     fixed=()):
         """Identify ``problem``'s model with ``effects``. Returns ``self``.
 
-        ``start``: values of nonlinear parameters to start from (a warm start from an earlier fit; the others start
-        from their effect's grid); ``grid``: search the grid of start points of those ``start`` does not give;
-        ``fixed``: nonlinear parameters held at their ``start`` values. ``fit_problem`` fits from the grids."""
+        ``start``: values of nonlinear parameters to start from (a warm start from an earlier
+        fit; the others start from their effect's grid); ``grid``: search the grid of start
+        points of those ``start`` does not give; ``fixed``: nonlinear parameters held at their
+        ``start`` values. ``fit_problem`` fits from the grids."""
         effects = tuple(effects)
         fit = search.fit(problem, effects, dict(start) if start else None, bool(grid), tuple(fixed),
                          bool(self.refine), int(self.max_evals))
@@ -111,13 +114,14 @@ class VariableProjection(Estimator):
 
     @property
     def vessel_(self):
-        """The identified model with its own steering gear, for closed-loop manoeuvres (built when asked: the
-        doctor's many fits never need it)."""
+        """The identified model with its own steering gear, for closed-loop manoeuvres (built
+        when asked: the doctor's many fits never need it)."""
         return self.problem_.vessel(self.effects_, self.fit_.values, None, self.fit_.coefs, replay=False)
 
     def replay(self, df, meta: dict | None = None, name: str = ""):
-        """The identified model replayed through a record (its measured rudder and propeller, its own depth, the
-        effects as identified), or None when it diverges (:meth:`EffectsProblem.predict`)."""
+        """The identified model replayed through a record (its measured rudder and propeller, its
+        own depth, the effects as identified), or None when it diverges
+        (:meth:`EffectsProblem.predict`)."""
         pb = self.problem_
         return pb.predict(self.fit_, df, pb.info_for(df, meta, name))
 
@@ -135,18 +139,19 @@ class VariableProjection(Estimator):
 
 def identify_effects(problem: EffectsProblem, effects=(), refine: bool = False, max_evals: int = 100,
                      start: dict | None = None, grid: bool = True, fixed=()) -> Fit:
-    """``problem``'s model identified with ``effects`` by :class:`VariableProjection` (the estimator's
-    ``fit_effects``, where ``fit_problem`` sends a study run's model with effects), with a warm start; the search's
-    :class:`~.search.Fit`. ``refine``, ``max_evals``: the estimator's parameters (``refine`` off by default: the
-    doctor polishes on the replays only in its ladder's steps); ``start``, ``grid``, ``fixed``: see
+    """``problem``'s model identified with ``effects`` by :class:`VariableProjection` (the
+    estimator's ``fit_effects``, where ``fit_problem`` sends a study run's model with effects), with
+    a warm start; the search's :class:`~.search.Fit`. ``refine``, ``max_evals``: the estimator's
+    parameters (``refine`` off by default: the doctor polishes on the replays only in its ladder's
+    steps); ``start``, ``grid``, ``fixed``: see
     :meth:`VariableProjection.fit_effects`."""
     est = VariableProjection(refine=refine, max_evals=max_evals)
     return est.fit_effects(problem, effects, start=start, grid=grid, fixed=fixed).fit_
 
 
 def hidden_truth(problem: EffectsProblem, vessel) -> dict:
-    """The effects' parameters of a simulated run as the truth vessel has them (its environment: current, wind,
-    steering gear, constant forces), in the user's terms."""
+    """The effects' parameters of a simulated run as the truth vessel has them (its environment:
+    current, wind, steering gear, constant forces), in the user's terms."""
     env = dict(zip(vessel.param_names, vessel.params))
     q = problem.scale
     return {"current_speed": env["current_speed"], "current_direction_deg": math.degrees(env["current_dir"]) % 360,

@@ -1,5 +1,5 @@
-"""The residual forces of a fitted model on its training records (inverse dynamics): what the doctor plots
-against the states and the rudder, and what the rudder-residual probe bins."""
+"""The residual forces of a fitted model on its training records (inverse dynamics): what the
+doctor plots against the states and the rudder, and what the rudder-residual probe bins."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,8 +9,9 @@ from .search import Fit
 
 
 def residuals(problem: EffectsProblem, fit: Fit, names: list) -> list:
-    """Inverse dynamics of the fitted model on the training records: per segment the times, the residual
-    forces [N, N, N m] (measured inertial forces minus the model's) and the states and inputs at the rows."""
+    """Inverse dynamics of the fitted model on the training records: per segment the times, the
+    residual forces [N, N, N m] (measured inertial forces minus the model's) and the states and
+    inputs at the rows."""
     out, seen = [], set()
     for seg in problem.segments:
         y, Phi, cols = problem.rows(fit.effects, fit.values, segs=[seg])

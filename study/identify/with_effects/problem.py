@@ -1,6 +1,6 @@
-"""Records and a force model, ready to be identified with any set of effects (:class:`EffectsProblem`): the
-parameters each effect adds, the simulation vessel of a record, the regression rows, the linear solve and the
-replay through a record."""
+"""Records and a force model, ready to be identified with any set of effects
+(:class:`EffectsProblem`): the parameters each effect adds, the simulation vessel of a record,
+the regression rows, the linear solve and the replay through a record."""
 from __future__ import annotations
 
 import itertools
@@ -26,8 +26,8 @@ ENVELOPE = {"speed_U0": 5.0, "r_U0_L": 20.0}
 
 
 def record_h_T(df: pd.DataFrame, meta: dict | None, draft: float) -> float | None:
-    """A record's water depth as h/T: its ``depth`` column [m] (median), else ``depth`` in its metadata (metres,
-    or a mapping with ``h_T``); None when not measured or deep."""
+    """A record's water depth as h/T: its ``depth`` column [m] (median), else ``depth`` in its
+    metadata (metres, or a mapping with ``h_T``); None when not measured or deep."""
     if "depth" in df.columns:
         d = pd.to_numeric(df["depth"], errors="coerce").to_numpy(float)
         d = d[np.isfinite(d)]
@@ -53,16 +53,17 @@ class EffectsProblem:
     Parameters
     ----------
     vessel_cfg : dict
-        The vessel as the user knows it (``conf/vessel``), including a known depth already applied if any.
+        The vessel as the user knows it (``conf/vessel``), including a known depth already applied
+        if any.
     model_cfg : dict
-        A ``type: kind`` model config: ``equations`` (coefficients to identify, per equation; may be empty: a
-        known model), ``omit`` (terms set to zero).
+        A ``type: kind`` model config: ``equations`` (coefficients to identify, per equation; may be
+        empty: a known model), ``omit`` (terms set to zero).
     records : list of Records or DataFrames (training)
     structure : str, dict or None
-        The sample structure of the rows. Default: Savitzky-Golay smoothing over a fifth of the time the ship
-        takes to travel its length (cubic; measured: it cuts the errors-in-variables bias of the effects'
-        estimates several-fold against integral or central rows at 1 % noise, because the nonlinear force
-        functions are evaluated on smoothed states).
+        The sample structure of the rows. Default: Savitzky-Golay smoothing over a fifth of the time
+        the ship takes to travel its length (cubic; measured: it cuts the errors-in-variables bias
+        of the effects' estimates several-fold against integral or central rows at 1 % noise,
+        because the nonlinear force functions are evaluated on smoothed states).
     effects : dict name -> Effect, or None (every discovered effect)
     """
 
@@ -155,8 +156,8 @@ class EffectsProblem:
         return self.effects[name]
 
     def free_coefficients(self, effects, model: bool = True) -> dict:
-        """Free vessel parameters -> equation: the model's (unless ``model`` is False: then the vessel config's
-        values are kept), then those the effects free."""
+        """Free vessel parameters -> equation: the model's (unless ``model`` is False: then the
+        vessel config's values are kept), then those the effects free."""
         out = dict(self.model_eq) if model else {}
         for e in effects:
             for c, eq in self.effect(e).free_coefficients(self).items():
@@ -170,7 +171,8 @@ class EffectsProblem:
         return out
 
     def outer_params(self, effects) -> list:
-        """(name, lo, hi, grid) of the nonlinear parameters of ``effects``, bounds in physical units."""
+        """(name, lo, hi, grid) of the nonlinear parameters of ``effects``, bounds in physical
+        units."""
         return [s for e in effects for s in self.effect(e).outer(self)]
 
     def variants(self, effects) -> list:
@@ -179,8 +181,8 @@ class EffectsProblem:
         return [dict(kv for d in combo for kv in d.items()) for combo in itertools.product(*per)] or [{}]
 
     def by_effect(self, fit: Fit) -> dict:
-        """Each effect's own values of a fit: its nonlinear parameters, variant, linear unknowns and the
-        coefficients it freed (the model's own free coefficients under 'model')."""
+        """Each effect's own values of a fit: its nonlinear parameters, variant, linear unknowns
+        and the coefficients it freed (the model's own free coefficients under 'model')."""
         out = {"model": {c: fit.coefs[c] for c in self.model_free if c in fit.coefs}}
         for e in fit.effects:
             eff = self.effect(e)
@@ -190,8 +192,9 @@ class EffectsProblem:
         return out
 
     def describe(self, fit: Fit, effects=None, model: bool = True) -> dict:
-        """The fit's parameters in the user's terms (current as speed and direction, ...), for ``effects``
-        (default: all of the fit's), and with ``model`` the model's own free coefficients."""
+        """The fit's parameters in the user's terms (current as speed and direction, ...), for
+        ``effects`` (default: all of the fit's), and with ``model`` the model's own free
+        coefficients."""
         own = self.by_effect(fit)
         keep = set(fit.effects if effects is None else effects) | ({"model"} if model else set())
         return describe_values(self.effects, {k: v for k, v in own.items() if k in keep})
@@ -213,11 +216,12 @@ class EffectsProblem:
 
     def vessel(self, effects, values: dict, info: RecordInfo | None = None, coefs: dict | None = None,
                replay: bool = True):
-        """The simulation vessel of one record: the effects' simulator effects (depth) and parameters, the
-        omitted terms zeroed, and with ``coefs`` the identified coefficients (each scaled as the effects scale
-        its published value, e.g. by the record's depth) and the effects' constant forces. ``replay``: driven by
-        a record's rudder angle (applied as measured unless an effect says it is a command); otherwise
-        (closed-loop manoeuvres) the vessel's own steering gear."""
+        """The simulation vessel of one record: the effects' simulator effects (depth) and
+        parameters, the omitted terms zeroed, and with ``coefs`` the identified coefficients
+        (each scaled as the effects scale its published value, e.g. by the record's depth) and
+        the effects' constant forces. ``replay``: driven by a record's rudder angle (applied as
+        measured unless an effect says it is a command); otherwise (closed-loop manoeuvres) the
+        vessel's own steering gear."""
         effs = [self.effect(e) for e in effects]
         sim = [s for eff in effs for s in eff.sim_effects(self, values, info)]
         v = self._load(sim)
@@ -237,15 +241,17 @@ class EffectsProblem:
         return v.with_params(**ch)
 
     def _factor(self, v, i: int) -> float:
-        """How the effects scale a coefficient's published value (the depth's factor): 1 when unchanged."""
+        """How the effects scale a coefficient's published value (the depth's factor): 1 when
+        unchanged."""
         b = float(self.base.params[i])
         return float(v.params[i]) / b if b != 0.0 else 1.0
 
     # ---------------------------------------------------------------------------------------------- rows
     def rows(self, effects, values: dict, segs=None, model: bool = True):
-        """(y (m, 3), Phi (m, 3, k), names) of the training segments (or the given ones), every unknown's
-        column over the three equations; rows scaled by 0.5 rho L d U0^2 (times L for N). ``model=False``:
-        the model's own coefficients at the vessel config's values (not identified)."""
+        """(y (m, 3), Phi (m, 3, k), names) of the training segments (or the given ones), every
+        unknown's column over the three equations; rows scaled by 0.5 rho L d U0^2 (times L for
+        N). ``model=False``: the model's own coefficients at the vessel config's values (not
+        identified)."""
         effs = [self.effect(e) for e in effects]
         free = list(self.free_coefficients(effects, model))
         lin = list(self.linear_unknowns(effects))
@@ -284,9 +290,10 @@ class EffectsProblem:
         return np.concatenate(ys), np.concatenate(phis), free + lin
 
     def _regressors(self, seg, v, P0, idx, nodes, seg2, ops, changed):
-        """The kind's regressors of a segment, cached on what they depend on (the vessel's parameters and the
-        changed columns): most candidates' outer parameters (wind, steering gear...) leave them unchanged, and
-        the compiled equations at every node for every free coefficient are most of an evaluation's cost."""
+        """The kind's regressors of a segment, cached on what they depend on (the vessel's
+        parameters and the changed columns): most candidates' outer parameters (wind, steering
+        gear...) leave them unchanged, and the compiled equations at every node for every free
+        coefficient are most of an evaluation's cost."""
         nk = len(v.kind.PARAM_NAMES)  # the kinds' equations read only their own parameters, not the environment
         key = (id(seg), seg.record, P0[:nk].tobytes(), tuple(idx),
                tuple((c, hash(np.asarray(nodes[c]).tobytes()), hash(np.asarray(seg2.data[c]).tobytes()))
@@ -300,8 +307,9 @@ class EffectsProblem:
         return hit
 
     def _nodes(self, seg, seg2, changed):
-        """The structure's node values of a segment, the unchanged columns' cached (smoothing every column of
-        every segment at every evaluation would cost as much as the rest of the rows)."""
+        """The structure's node values of a segment, the unchanged columns' cached (smoothing
+        every column of every segment at every evaluation would cost as much as the rest of the
+        rows)."""
         key = (id(seg), seg.record, len(seg.t))
         if key not in self._node_cache:
             self._node_cache[key] = self.structure.nodes(seg)
@@ -312,8 +320,9 @@ class EffectsProblem:
         return nodes
 
     def actual_rudder(self, v, t, delta, n):
-        """The rudder angle the vessel's steering gear (rate, lag, delay) makes of a commanded series: the
-        integrator's own actuator, run open loop over the record (its output does not depend on the hull)."""
+        """The rudder angle the vessel's steering gear (rate, lag, delay) makes of a commanded
+        series: the integrator's own actuator, run open loop over the record (its output does not
+        depend on the hull)."""
         t = np.asarray(t, float)
         h = float(np.median(np.diff(t)))
         tu = t[0] + h * np.arange(int(round((t[-1] - t[0]) / h)) + 1)
@@ -322,7 +331,8 @@ class EffectsProblem:
         return np.interp(t, tu, out[:, 6, 0])
 
     def reference(self) -> np.ndarray:
-        """Per equation the sum of squared targets of the effect-free rows: the scale of the training error."""
+        """Per equation the sum of squared targets of the effect-free rows: the scale of the
+        training error."""
         if self._ref is None:
             y, _, _ = self.rows((), {})
             self._ref = np.array([float(np.sum(y[:, k] ** 2)) or 1.0 for k in range(3)])
@@ -330,9 +340,9 @@ class EffectsProblem:
 
     # ------------------------------------------------------------------------------------- identification
     def solve(self, effects, values: dict, model: bool = True, _unanchored: bool = False):
-        """Linear unknowns for fixed nonlinear parameters: one least-squares problem over the three equations,
-        each weighted by its reference scale (the training error is the mean of rss/reference over X, Y, N).
-        Returns (coefs, training error, rss per equation)."""
+        """Linear unknowns for fixed nonlinear parameters: one least-squares problem over the
+        three equations, each weighted by its reference scale (the training error is the mean of
+        rss/reference over X, Y, N). Returns (coefs, training error, rss per equation)."""
         y, Phi, names = self.rows(effects, values, model=model)
         ref = self.reference()
         w = 1.0 / np.sqrt(ref)
@@ -376,14 +386,15 @@ class EffectsProblem:
         return uncertainty.posterior(self, fit)
 
     def identifiability(self, fit: Fit) -> list[dict]:
-        """Per anchored model coefficient, how far the records determine it (:func:`uncertainty.identifiability`)."""
+        """Per anchored model coefficient, how far the records determine it
+        (:func:`uncertainty.identifiability`)."""
         return uncertainty.identifiability(self, fit)
 
     # ------------------------------------------------------------------------------------------- replay
     def predict(self, fit: Fit, df: pd.DataFrame, info: RecordInfo | None = None) -> pd.DataFrame | None:
-        """The identified model replayed through a record (its measured rudder and propeller, its own depth),
-        from the record's initial state; None when it diverges (leaves the physical envelope ``ENVELOPE``).
-        Only the record's first segment (up to a gap)."""
+        """The identified model replayed through a record (its measured rudder and propeller, its
+        own depth), from the record's initial state; None when it diverges (leaves the physical
+        envelope ``ENVELOPE``). Only the record's first segment (up to a gap)."""
         seg = segments(df, 0, min_len=10)
         if not seg:
             return None

@@ -1,5 +1,6 @@
-"""How far a replay is from a record: per channel RMSE and NRMSE, the track error, and the doctor's single
-number (the mean NRMSE of u, v, r and psi over records); a diverged replay is inf, never a percentage."""
+"""How far a replay is from a record: per channel RMSE and NRMSE, the track error, and the
+doctor's single number (the mean NRMSE of u, v, r and psi over records); a diverged replay is
+inf, never a percentage."""
 from __future__ import annotations
 
 import math
@@ -18,9 +19,9 @@ NRMSE_CAP = 10.0
 
 
 def record_errors(meas: pd.DataFrame, pred: pd.DataFrame | None, floors: dict | None = None) -> dict:
-    """Per channel RMSE and NRMSE (RMSE over the measured spread, or over ``floors[c]`` when that is larger; at
-    most ``NRMSE_CAP``) of a prediction; the track error (RMSE of the position over the track's extent); a
-    diverged prediction (None) has inf errors and ``diverged`` set."""
+    """Per channel RMSE and NRMSE (RMSE over the measured spread, or over ``floors[c]`` when that
+    is larger; at most ``NRMSE_CAP``) of a prediction; the track error (RMSE of the position over
+    the track's extent); a diverged prediction (None) has inf errors and ``diverged`` set."""
     out = {}
     if pred is None:
         for c in CHANNELS + ("track",):
@@ -45,13 +46,14 @@ def record_errors(meas: pd.DataFrame, pred: pd.DataFrame | None, floors: dict | 
 
 
 def record_error(errors_of_record: dict) -> float:
-    """One record's validation error: the mean NRMSE of u, v, r and psi (inf when its replay diverged)."""
+    """One record's validation error: the mean NRMSE of u, v, r and psi (inf when its replay
+    diverged)."""
     return float(np.mean([errors_of_record[c]["nrmse"] for c in CHANNELS]))
 
 
 def validation_error(errors: dict) -> float:
-    """The doctor's single number: the mean over records of the mean NRMSE of u, v, r and psi; inf when a
-    replay diverged (see ``diverged_records``)."""
+    """The doctor's single number: the mean over records of the mean NRMSE of u, v, r and psi;
+    inf when a replay diverged (see ``diverged_records``)."""
     vals = [record_error(errors[r]) for r in errors]
     return float(np.mean(vals)) if vals else math.nan
 

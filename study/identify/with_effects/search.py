@@ -1,8 +1,9 @@
-"""The search of identification with effects (variable projection, Golub & Pereyra 1973): the effects'
-nonlinear parameters from a grid, then a bounded Nelder-Mead search on the equation error (the linear unknowns
-solved at each point, ``EffectsProblem.solve``), optionally refined on the training replays' error; each discrete
-variant of the effects fitted and the best kept. Functions of an
-:class:`~study.identify.with_effects.problem.EffectsProblem` (``pb``); ``pb.fit`` calls :func:`fit`."""
+"""The search of identification with effects (variable projection, Golub & Pereyra 1973): the
+effects' nonlinear parameters from a grid, then a bounded Nelder-Mead search on the equation
+error (the linear unknowns solved at each point, ``EffectsProblem.solve``), optionally refined on
+the training replays' error; each discrete variant of the effects fitted and the best kept.
+Functions of an :class:`~study.identify.with_effects.problem.EffectsProblem` (``pb``); ``pb.fit``
+calls :func:`fit`."""
 from __future__ import annotations
 
 import itertools
@@ -16,8 +17,9 @@ from .replay_errors import record_errors, validation_error
 
 @dataclass
 class Fit:
-    """One identification: the effects, their nonlinear parameters and variant (``outer``), the linear unknowns
-    (``coefs``: free model coefficients and the effects' linear parameters), the training error."""
+    """One identification: the effects, their nonlinear parameters and variant (``outer``), the
+    linear unknowns (``coefs``: free model coefficients and the effects' linear parameters), the
+    training error."""
 
     effects: tuple
     outer: dict
@@ -37,8 +39,8 @@ SCREEN_EVALS = 25
 
 
 def _half_step(grid, lo: float, hi: float) -> float:
-    """Half the smallest spacing of a start grid (a tenth of the box for a one-point grid): the local search's
-    first step."""
+    """Half the smallest spacing of a start grid (a tenth of the box for a one-point grid): the
+    local search's first step."""
     g = np.unique(np.asarray(grid, float))
     d = np.diff(g)
     return float(0.5 * d.min()) if len(d) else 0.1 * float(hi - lo)
@@ -47,14 +49,15 @@ def _half_step(grid, lo: float, hi: float) -> float:
 
 def fit(pb, effects, start: dict | None = None, grid: bool = True, fixed=(), refine: bool = False,
         max_evals: int = 100) -> Fit:
-    """Identify the model with ``effects``: each variant of the effects fitted, the best (lowest training
-    error) kept.
+    """Identify the model with ``effects``: each variant of the effects fitted, the best (lowest
+    training error) kept.
 
-    The nonlinear parameters not in ``fixed`` (those keep their ``start`` values) start from ``start``
-    where known and from the grid of their effect otherwise; the best start point is polished by a
-    Nelder-Mead search inside the bounds (equation error, variable projection). With ``refine`` they are then polished
-    on the training records' replay error (output error, the linear unknowns still by equation error at
-    each point): less biased by measurement noise than the equation error.
+    The nonlinear parameters not in ``fixed`` (those keep their ``start`` values) start from
+    ``start`` where known and from the grid of their effect otherwise; the best start point is
+    polished by a Nelder-Mead search inside the bounds (equation error, variable projection). With
+    ``refine`` they are then polished on the training records' replay error (output error, the
+    linear unknowns still by equation error at each point): less biased by measurement noise than
+    the equation error.
     """
     effects = tuple(effects)
     variants = pb.variants(effects)
@@ -79,8 +82,8 @@ def fit(pb, effects, start: dict | None = None, grid: bool = True, fixed=(), ref
 
 
 class _Objectives:
-    """The search's objectives over the free nonlinear parameters ``names`` of a variant (inside their box
-    ``lo`` .. ``hi``), and how many times they were evaluated (``count``)."""
+    """The search's objectives over the free nonlinear parameters ``names`` of a variant (inside
+    their box ``lo`` .. ``hi``), and how many times they were evaluated (``count``)."""
 
     def __init__(self, pb, effects, held: dict, spec: list):
         self.pb, self.effects, self.held = pb, effects, held  # held: the variant and the fixed parameters
@@ -94,8 +97,8 @@ class _Objectives:
         return {**self.held, **dict(zip(self.names, (float(v) for v in np.clip(x, self.lo, self.hi))))}
 
     def equation_error(self, x, model=True) -> float:
-        """The equation error at ``x`` (with ``model`` False, the model's coefficients held at the vessel
-        config's values); 1e6 where it cannot be computed."""
+        """The equation error at ``x`` (with ``model`` False, the model's coefficients held at
+        the vessel config's values); 1e6 where it cannot be computed."""
         self.count += 1
         try:
             j = self.pb.solve(self.effects, self.outer_of(x), model=model)[1]
@@ -104,8 +107,8 @@ class _Objectives:
             return 1e6
 
     def replay_error(self, x) -> float:
-        """The training records' replay error at ``x`` (output error; the linear unknowns by equation error);
-        1e6 where it cannot be computed."""
+        """The training records' replay error at ``x`` (output error; the linear unknowns by
+        equation error); 1e6 where it cannot be computed."""
         self.count += 1
         pb = self.pb
         outer = self.outer_of(x)
@@ -121,8 +124,9 @@ class _Objectives:
 
 
 def _start_points(obj: _Objectives, new: list, known: dict, grid: bool) -> list:
-    """The search's start points: with ``grid``, every point of the grids of the parameters ``new`` (the others
-    at their ``known`` values); else one point (the known values, the middle of the box for the others)."""
+    """The search's start points: with ``grid``, every point of the grids of the parameters
+    ``new`` (the others at their ``known`` values); else one point (the known values, the middle
+    of the box for the others)."""
     if grid and new:
         pts = []
         for combo in itertools.product(*[s[3] for s in new]):
@@ -134,8 +138,8 @@ def _start_points(obj: _Objectives, new: list, known: dict, grid: bool) -> list:
 
 
 def _nelder_mead(fun, x0, steps, lo, hi, evals: int, fatol: float, args=()):
-    """A bounded Nelder-Mead search from ``x0`` whose first simplex steps ``steps`` along each axis (backwards
-    where a step forwards would leave the box)."""
+    """A bounded Nelder-Mead search from ``x0`` whose first simplex steps ``steps`` along each
+    axis (backwards where a step forwards would leave the box)."""
     simplex = np.vstack([x0] + [np.clip(x0 + np.eye(len(x0))[i] * steps[i] *
                                         (1 if x0[i] + steps[i] <= hi[i] else -1), lo, hi)
                                 for i in range(len(x0))])
@@ -151,9 +155,9 @@ def _local(obj: _Objectives, x0, steps, evals: int, model=True):
 
 
 def _search_equation_error(obj: _Objectives, pts: list, steps, max_evals: int, locate: bool):
-    """The best point of the equation error: the best start point polished by a local search (kept only if it
-    improves). With ``locate``, a start point is added first: the best one with the model's coefficients held
-    at the vessel config's values, polished the same way."""
+    """The best point of the equation error: the best start point polished by a local search
+    (kept only if it improves). With ``locate``, a start point is added first: the best one with
+    the model's coefficients held at the vessel config's values, polished the same way."""
     if locate:
         # an identified model absorbs most of a wrong effect: its training error is flat except in a basin a
         # few % of U0 wide around the truth (measured: a current on an identified KVLCC2 hull), which a grid
@@ -169,8 +173,8 @@ def _search_equation_error(obj: _Objectives, pts: list, steps, max_evals: int, l
 
 
 def _refine_on_replays(obj: _Objectives, best, steps, max_evals: int):
-    """``best`` polished on the training records' replay error (a Nelder-Mead search with a simplex of a quarter
-    of the first one's steps), kept only if it improves."""
+    """``best`` polished on the training records' replay error (a Nelder-Mead search with a
+    simplex of a quarter of the first one's steps), kept only if it improves."""
     r2 = _nelder_mead(obj.replay_error, best, 0.25 * steps, obj.lo, obj.hi, max_evals, 1e-6)
     if r2.fun < obj.replay_error(best):
         return np.clip(r2.x, obj.lo, obj.hi)
@@ -178,8 +182,8 @@ def _refine_on_replays(obj: _Objectives, best, steps, max_evals: int):
 
 
 def _fit_variant(pb, effects, variant, start, grid, fixed, refine, max_evals) -> Fit:
-    """One variant of ``effects`` fitted (the arguments as for :func:`fit`): the equation error searched from
-    the start points, then optionally refined on the replay error."""
+    """One variant of ``effects`` fitted (the arguments as for :func:`fit`): the equation error
+    searched from the start points, then optionally refined on the replay error."""
     spec = pb.outer_params(effects)
     start = dict(start or {})
     fixed_vals = {n: start[n] for n in fixed if n in start}

@@ -1,7 +1,8 @@
-"""The Gaussian side of identification with effects: the anchor's prior on the model's coefficients, the
-posterior of a fit's linear unknowns, and how far the records determine each coefficient (the identifiability
-table of the doctor's report). Functions of an :class:`~study.identify.with_effects.problem.EffectsProblem`
-(``pb``), which calls them from ``solve``, ``posterior`` and ``identifiability``."""
+"""The Gaussian side of identification with effects: the anchor's prior on the model's
+coefficients, the posterior of a fit's linear unknowns, and how far the records determine each
+coefficient (the identifiability table of the doctor's report). Functions of an
+:class:`~study.identify.with_effects.problem.EffectsProblem` (``pb``), which calls them from
+``solve``, ``posterior`` and ``identifiability``."""
 from __future__ import annotations
 
 import numpy as np
@@ -10,10 +11,10 @@ from .search import Fit
 
 
 def noise_per_row(pb) -> float:
-    """The training error's share of one independent row, from the unanchored baseline fit: its error over
-    the EFFECTIVE number of rows per equation, m (1 - rho) / (1 + rho) with rho the lag-one autocorrelation
-    of its residuals (smoothed rows of a manoeuvre are far from independent: rho is near 1, and counting
-    every row would let any misfit overrule the prior)."""
+    """The training error's share of one independent row, from the unanchored baseline fit: its
+    error over the EFFECTIVE number of rows per equation, m (1 - rho) / (1 + rho) with rho the
+    lag-one autocorrelation of its residuals (smoothed rows of a manoeuvre are far from
+    independent: rho is near 1, and counting every row would let any misfit overrule the prior)."""
     y, Phi, names = pb.rows((), {})
     coefs, J, _ = pb.solve((), {}, model=True, _unanchored=True)
     c = np.array([coefs.get(n, 0.0) for n in names])
@@ -30,17 +31,18 @@ def noise_per_row(pb) -> float:
     return J / m_eff
 
 def anchor_prior(pb, names: list, m: int):
-    """(prior values, weights) of the unknowns ``names`` in the normal equations: the model's own free
-    coefficients anchored to the vessel config's values (the coefficients the user has: published, captive
-    tests, CFD) with a standard deviation of ``anchor`` (relative) times their size, at least ``anchor``
-    times the median size of the model's nonzero coefficients (a coefficient published as 0 is not known to
-    be 0). The data term is the training error (1/3) sum_e rss_e/ref_e; for a Gaussian likelihood whose
-    noise is the same fraction of each equation's scale, that fraction is the unanchored baseline's error
-    over the effective number of independent rows (``noise_per_row``), so the prior enters as that
-    fraction times sum_j ((theta_j - theta0_j)/s_j)^2 (scaled to the rows of the fit at hand).
-    Coefficients an effect frees are anchored the same way when the config has a value for them (an effect
-    says they may differ from it, within the prior); terms the model omits, and the effects' own unknowns,
-    are not. Assumption labelled: independent priors, no correlation between coefficients."""
+    """(prior values, weights) of the unknowns ``names`` in the normal equations: the model's own
+    free coefficients anchored to the vessel config's values (the coefficients the user has:
+    published, captive tests, CFD) with a standard deviation of ``anchor`` (relative) times their
+    size, at least ``anchor`` times the median size of the model's nonzero coefficients (a
+    coefficient published as 0 is not known to be 0). The data term is the training error (1/3)
+    sum_e rss_e/ref_e; for a Gaussian likelihood whose noise is the same fraction of each
+    equation's scale, that fraction is the unanchored baseline's error over the effective number
+    of independent rows (``noise_per_row``), so the prior enters as that fraction times sum_j
+    ((theta_j - theta0_j)/s_j)^2 (scaled to the rows of the fit at hand). Coefficients an effect
+    frees are anchored the same way when the config has a value for them (an effect says they may
+    differ from it, within the prior); terms the model omits, and the effects' own unknowns, are
+    not. Assumption labelled: independent priors, no correlation between coefficients."""
     anchored = [j for j, n in enumerate(names) if n in pb.model_eq or
                 (n in pb.base.param_names and n not in pb.omit and pb.base_param(n) != 0.0)]
     if not anchored:
@@ -58,11 +60,12 @@ def anchor_prior(pb, names: list, m: int):
     return theta0, lam
 
 def posterior(pb, fit: Fit) -> dict | None:
-    """The Gaussian posterior of a fit's linear unknowns (free model coefficients and the effects' linear
-    parameters) with the effects' nonlinear parameters held at their estimates: ``{'names', 'mean', 'cov',
-    'tau', 'prior'}``. The covariance is that of the normal equations ``solve`` uses (anchored when the
-    problem is), with the data weight of ``noise_per_row`` (the effective number of independent rows); an
-    unanchored fit gets the same data weight and no prior. None when nothing is free."""
+    """The Gaussian posterior of a fit's linear unknowns (free model coefficients and the
+    effects' linear parameters) with the effects' nonlinear parameters held at their estimates:
+    ``{'names', 'mean', 'cov', 'tau', 'prior'}``. The covariance is that of the normal equations
+    ``solve`` uses (anchored when the problem is), with the data weight of ``noise_per_row`` (the
+    effective number of independent rows); an unanchored fit gets the same data weight and no
+    prior. None when nothing is free."""
     y, Phi, names = pb.rows(fit.effects, fit.outer, model=True)
     if not names:
         return None
@@ -80,10 +83,11 @@ def posterior(pb, fit: Fit) -> dict | None:
     return {"names": list(names), "mean": mean, "cov": cov, "tau": tau, "prior": prior}
 
 def identifiability(pb, fit: Fit) -> list[dict]:
-    """Per anchored model coefficient of a fit: prior, estimate, posterior and prior standard deviation and
-    their ratio (near 0: the records determine it; near 1: the prior does), with a plain sentence. The
-    posterior covariance is that of the anchored normal equations (``solve``): data weight as there, the
-    effects' nonlinear parameters held at their estimates. Empty when the model is not anchored."""
+    """Per anchored model coefficient of a fit: prior, estimate, posterior and prior standard
+    deviation and their ratio (near 0: the records determine it; near 1: the prior does), with a
+    plain sentence. The posterior covariance is that of the anchored normal equations
+    (``solve``): data weight as there, the effects' nonlinear parameters held at their estimates.
+    Empty when the model is not anchored."""
     if not pb.anchor or not pb.model_free:
         return []
     post = posterior(pb, fit)

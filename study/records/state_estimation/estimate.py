@@ -1,5 +1,6 @@
-"""The estimate of a record's states: :func:`estimate_states` (the record's scales, measurement noise, initial
-state, process noise, then the filter and the smoother) and :func:`apply_to_frame` (a record's table with them)."""
+"""The estimate of a record's states: :func:`estimate_states` (the record's scales, measurement
+noise, initial state, process noise, then the filter and the smoother) and :func:`apply_to_frame`
+(a record's table with them)."""
 from __future__ import annotations
 
 import math
@@ -17,10 +18,11 @@ from study.records.state_estimation.process import process_noise
 
 @dataclass
 class StateEstimate:
-    """The smoothed states at the record's times: ``frame`` (columns ``time`` and :data:`STATES`), ``std``
-    (their smoothed standard deviations, same columns), and ``settings`` (what the filter used: the noise
-    standard deviations and whether each was estimated, the process noise and how it was chosen, the
-    log-likelihood, the seconds taken); JSON-serialisable, as stored in a record's metadata."""
+    """The smoothed states at the record's times: ``frame`` (columns ``time`` and
+    :data:`STATES`), ``std`` (their smoothed standard deviations, same columns), and ``settings``
+    (what the filter used: the noise standard deviations and whether each was estimated, the
+    process noise and how it was chosen, the log-likelihood, the seconds taken);
+    JSON-serialisable, as stored in a record's metadata."""
 
     frame: pd.DataFrame
     std: pd.DataFrame
@@ -48,8 +50,8 @@ def _lagged(t, a, lag_s):
 
 
 def _scales(t, Z, h):
-    """The record's robust scales (the initial state, the noise floors): the lag [s] of up to ten samples, and
-    the 90th percentiles of the speed [m/s] and of the turn rate [rad/s] over it."""
+    """The record's robust scales (the initial state, the noise floors): the lag [s] of up to ten
+    samples, and the 90th percentiles of the speed [m/s] and of the turn rate [rad/s] over it."""
     n = len(t)
     lag_s = h * max(1, min(10, n // 20))
     dx, dtx = _lagged(t, Z[:, 0], lag_s)
@@ -63,8 +65,9 @@ def _scales(t, Z, h):
 
 
 def _initial_state(t, Z, std_used, lag_s, h, U_typ, r_typ):
-    """The diffuse initial state [A4] and its covariance: positions and heading from the first samples,
-    velocities from a line through the first samples (rotated into body axes), accelerations zero."""
+    """The diffuse initial state [A4] and its covariance: positions and heading from the first
+    samples, velocities from a line through the first samples (rotated into body axes),
+    accelerations zero."""
     n = len(t)
 
     def first(j):
@@ -97,19 +100,19 @@ def _initial_state(t, Z, std_used, lag_s, h, U_typ, r_typ):
 
 
 def estimate_states(data, options: dict | None = None, **kw) -> StateEstimate:
-    """Estimate ``u, v, r, u_dot, v_dot, r_dot`` (and smoothed ``x0, y0, psi``) from a record's positions and
-    heading, refining measured ``u, v, r`` when present. The model, the assumptions [A1]-[A5] and the sources are
-    in ``docs/concepts/state-estimation.md``.
+    """Estimate ``u, v, r, u_dot, v_dot, r_dot`` (and smoothed ``x0, y0, psi``) from a record's
+    positions and heading, refining measured ``u, v, r`` when present. The model, the assumptions
+    [A1]-[A5] and the sources are in ``docs/concepts/state-estimation.md``.
 
     Parameters
     ----------
     data : DataFrame or dict of arrays
-        ``time`` (s, increasing, any spacing), ``x0``, ``y0`` (m), ``psi`` (rad); optionally ``u``, ``v``
-        (m/s), ``r`` (rad/s). NaN marks a missing sample of a channel (its update is skipped).
+        ``time`` (s, increasing, any spacing), ``x0``, ``y0`` (m), ``psi`` (rad); optionally ``u``,
+        ``v`` (m/s), ``r`` (rad/s). NaN marks a missing sample of a channel (its update is skipped).
     options : dict, optional (or keywords)
-        :data:`DEFAULTS`: ``position_std``, ``heading_std``, ``u_std``, ``v_std``, ``r_std`` (absolute
-        standard deviations or ``"auto"``), ``use_velocities`` (fuse measured u, v, r; default true),
-        ``process`` (``"ml"`` or ``{q_uv, q_r}``).
+        :data:`DEFAULTS`: ``position_std``, ``heading_std``, ``u_std``, ``v_std``, ``r_std``
+        (absolute standard deviations or ``"auto"``), ``use_velocities`` (fuse measured u, v, r;
+        default true), ``process`` (``"ml"`` or ``{q_uv, q_r}``).
 
     Returns
     -------
@@ -166,8 +169,9 @@ RECORD_COLUMNS = ("u", "v", "r", "u_dot", "v_dot", "r_dot")
 
 
 def apply_to_frame(df: pd.DataFrame, options: dict | None = None) -> tuple[pd.DataFrame, dict]:
-    """A copy of a record's table with ``u, v, r`` estimated (replaced, or added after ``time`` when missing)
-    and ``u_dot, v_dot, r_dot`` added; positions and heading stay as measured. Returns (frame, settings)."""
+    """A copy of a record's table with ``u, v, r`` estimated (replaced, or added after ``time``
+    when missing) and ``u_dot, v_dot, r_dot`` added; positions and heading stay as measured.
+    Returns (frame, settings)."""
     est = estimate_states(df, options)
     out = df.copy()
     for c in RECORD_COLUMNS:

@@ -1,7 +1,8 @@
 """The compiled kernels of the extended Kalman filter and the RTS smoother (numba, cached on disk).
 
 Self-contained: small dense 9 x 9 algebra written as loops, state order ``STATES`` of
-:mod:`study.records.state_estimation.options`. The model and its sources: ``docs/concepts/state-estimation.md``.
+:mod:`study.records.state_estimation.options`. The model and its sources:
+``docs/concepts/state-estimation.md``.
 """
 from __future__ import annotations
 
@@ -13,8 +14,8 @@ from numba import njit
 
 @njit(cache=True)
 def _step(x, h, F, Q, q_u, q_v, q_r):
-    """One prediction sub-step of length h from state x (in place): x <- f(x), F <- its Jacobian (set), Q <-
-    the sub-step's process noise (set)."""
+    """One prediction sub-step of length h from state x (in place): x <- f(x), F <- its Jacobian
+    (set), Q <- the sub-step's process noise (set)."""
     c = math.cos(x[2])
     s = math.sin(x[2])
     u, v, r, ud, vd, rd = x[3], x[4], x[5], x[6], x[7], x[8]
@@ -96,7 +97,8 @@ _NZ_K = np.array([2, 3, 4, 5, 6, 7, 2, 3, 4, 5, 6, 7, 5, 8, 6, 7, 8])
 
 @njit(cache=True)
 def _left(F, A, out, nzi, nzk):
-    """out = F A for a Jacobian F = I + N with the sparse N of ``_NZ_I, _NZ_K`` (17 row updates, not 729)."""
+    """out = F A for a Jacobian F = I + N with the sparse N of ``_NZ_I, _NZ_K`` (17 row updates,
+    not 729)."""
     for i in range(9):
         for j in range(9):
             out[i, j] = A[i, j]
@@ -130,9 +132,10 @@ def _propagate(F, P, Q, tmp, nzi, nzk):
 
 @njit(cache=True)
 def _ekf(t, Z, R, q_u, q_v, q_r, x_init, P_init, h_max, store, nzi, nzk):
-    """The filter over every sample. Z (n, 6): measurements of x0, y0, psi, u, v, r (NaN: none); R (6,)
-    variances. Returns (log-likelihood, x_f, P_f, x_p, P_p, Fs); the arrays are filled only with ``store``
-    (the smoother's inputs): x_p[k], P_p[k] the prediction at sample k, Fs[k] the Jacobian from k-1 to k."""
+    """The filter over every sample. Z (n, 6): measurements of x0, y0, psi, u, v, r (NaN: none);
+    R (6,) variances. Returns (log-likelihood, x_f, P_f, x_p, P_p, Fs); the arrays are filled
+    only with ``store`` (the smoother's inputs): x_p[k], P_p[k] the prediction at sample k, Fs[k]
+    the Jacobian from k-1 to k."""
     n = Z.shape[0]
     nst = n if store else 1
     x_f = np.zeros((nst, 9))
@@ -207,8 +210,8 @@ def _ekf(t, Z, R, q_u, q_v, q_r, x_init, P_init, h_max, store, nzi, nzk):
 
 @njit(cache=True)
 def _chol_solve(A, B, L, out):
-    """out = A^-1 B for a symmetric positive definite 9 x 9 A (Cholesky, no allocation); returns False if A is
-    not positive definite."""
+    """out = A^-1 B for a symmetric positive definite 9 x 9 A (Cholesky, no allocation); returns
+    False if A is not positive definite."""
     for i in range(9):
         for j in range(i + 1):
             acc = A[i, j]
@@ -236,7 +239,8 @@ def _chol_solve(A, B, L, out):
 
 @njit(cache=True)
 def _rts(x_f, P_f, x_p, P_p, Fs):
-    """Extended RTS smoother (Sarkka 2013, Sec. 9.1): states and standard deviations at every sample."""
+    """Extended RTS smoother (Sarkka 2013, Sec. 9.1): states and standard deviations at every
+    sample."""
     n = x_f.shape[0]
     xs = x_f.copy()
     Ps = P_f.copy()

@@ -1,5 +1,6 @@
-"""Measurement noise [A2]: the white-noise level of a channel by the difference method (:func:`noise_std`) and
-the standard deviation the filter uses for each channel, given or estimated (:func:`measurement_noise`)."""
+"""Measurement noise [A2]: the white-noise level of a channel by the difference method
+(:func:`noise_std`) and the standard deviation the filter uses for each channel, given or
+estimated (:func:`measurement_noise`)."""
 from __future__ import annotations
 
 import math
@@ -10,9 +11,10 @@ from study.records.state_estimation.options import CHANNELS
 
 
 def noise_std(a: np.ndarray, order: int = 4) -> float:
-    """The white-noise standard deviation of a smooth signal plus noise (NaN ignored), from its ``order``-th
-    differences (the difference method: von Neumann et al. 1941; Hall, Kay & Titterington 1990), robustly by their
-    median absolute deviation (1.4826 MAD estimates a normal sd; Rousseeuw & Croux 1993). See [A2] in
+    """The white-noise standard deviation of a smooth signal plus noise (NaN ignored), from its
+    ``order``-th differences (the difference method: von Neumann et al. 1941; Hall, Kay &
+    Titterington 1990), robustly by their median absolute deviation (1.4826 MAD estimates a normal
+    sd; Rousseeuw & Croux 1993). See [A2] in
     ``docs/concepts/state-estimation.md``."""
     a = np.asarray(a, float)
     a = a[np.isfinite(a)]
@@ -29,8 +31,9 @@ def noise_std(a: np.ndarray, order: int = 4) -> float:
 
 def measurement_noise(Z: np.ndarray, opts: dict, has: dict, h: float, U_typ: float,
                       r_typ: float) -> tuple[dict, dict, np.ndarray]:
-    """The measurement noise of each channel [A2]: the option's number, or ``"auto"``: :func:`noise_std` of the
-    channel (one number for ``x0`` and ``y0``: one GNSS), floored to keep the variance positive on noise-free data.
+    """The measurement noise of each channel [A2]: the option's number, or ``"auto"``:
+    :func:`noise_std` of the channel (one number for ``x0`` and ``y0``: one GNSS), floored to keep
+    the variance positive on noise-free data.
 
     Parameters
     ----------

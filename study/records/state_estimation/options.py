@@ -1,5 +1,6 @@
-"""The state estimator's names and options: the state order, the measured channels, the options with their
-defaults and their check (:func:`resolve_options`), and the fixed numbers of the filter and the search."""
+"""The state estimator's names and options: the state order, the measured channels, the options
+with their defaults and their check (:func:`resolve_options`), and the fixed numbers of the
+filter and the search."""
 from __future__ import annotations
 
 import math
@@ -27,7 +28,8 @@ GRID_PER_DECADE = 4
 
 
 def resolve_options(options: dict | None) -> dict:
-    """``options`` merged over :data:`DEFAULTS`; unknown keys refused (a misspelt option must not pass)."""
+    """``options`` merged over :data:`DEFAULTS`; unknown keys refused (a misspelt option must not
+    pass)."""
     opts = dict(DEFAULTS)
     for k, v in (options or {}).items():
         if k not in DEFAULTS:

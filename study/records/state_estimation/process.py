@@ -1,5 +1,6 @@
-"""Process noise by maximum likelihood [A3]: ``q_r`` from the yaw chain's likelihood (its own compiled filter),
-then ``q_uv`` from the full filter's, each over the smoother's bandwidth by a grid and Brent's method."""
+"""Process noise by maximum likelihood [A3]: ``q_r`` from the yaw chain's likelihood (its own
+compiled filter), then ``q_uv`` from the full filter's, each over the smoother's bandwidth by a
+grid and Brent's method."""
 from __future__ import annotations
 
 import math
@@ -26,8 +27,8 @@ def _matmul(A, B, out):
 
 @njit(cache=True)
 def _yaw_loglik(t, psi, r, R_psi, R_r, q_r, x_init, P_init, h_max):
-    """Log-likelihood of the heading (and yaw-rate) measurements under the yaw chain [psi, r, r_dot] alone
-    (it does not depend on u, v or positions): the ML search of q_r."""
+    """Log-likelihood of the heading (and yaw-rate) measurements under the yaw chain [psi, r,
+    r_dot] alone (it does not depend on u, v or positions): the ML search of q_r."""
     n = psi.shape[0]
     x = x_init.copy()
     P = P_init.copy()
@@ -89,7 +90,8 @@ def _yaw_loglik(t, psi, r, R_psi, R_r, q_r, x_init, P_init, h_max):
 
 
 def _optimise(fun, lo, hi, per_decade=GRID_PER_DECADE):
-    """Maximise ``fun(log10 omega)`` on [lo, hi]: a grid, then Brent's method around the best point."""
+    """Maximise ``fun(log10 omega)`` on [lo, hi]: a grid, then Brent's method around the best
+    point."""
     from scipy.optimize import minimize_scalar
 
     grid = np.linspace(lo, hi, max(3, int(math.ceil((hi - lo) * per_decade)) + 1))
@@ -106,8 +108,9 @@ def _optimise(fun, lo, hi, per_decade=GRID_PER_DECADE):
 
 
 def process_noise(process, t, Z, R, std_used, x_init, P_init, h, h_max, duration):
-    """The white-jerk spectral densities ``q_uv`` and ``q_r`` [A3]: given, or by maximum likelihood over the
-    bandwidth ``omega`` (``q = sigma^2 h omega^6``) from 2 pi / duration to the Nyquist frequency.
+    """The white-jerk spectral densities ``q_uv`` and ``q_r`` [A3]: given, or by maximum likelihood
+    over the bandwidth ``omega`` (``q = sigma^2 h omega^6``) from 2 pi / duration to the Nyquist
+    frequency.
 
     Parameters
     ----------
@@ -126,8 +129,8 @@ def process_noise(process, t, Z, R, std_used, x_init, P_init, h, h_max, duration
     -------
     q_uv, q_r : float
     info : dict
-        How they were chosen (the settings' ``process_how`` and, by maximum likelihood, the bandwidths, their
-        range, any at its bound, the likelihood evaluations).
+        How they were chosen (the settings' ``process_how`` and, by maximum likelihood, the
+        bandwidths, their range, any at its bound, the likelihood evaluations).
     """
     lo = math.log10(2.0 * math.pi / max(duration, 10 * h))
     hi = math.log10(math.pi / h)

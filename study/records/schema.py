@@ -249,7 +249,8 @@ def read_record(path, min_samples: int = 20, states: str = "measured", state_opt
     ``process``). ``plausibility``: as in :func:`validate`.
 
     CSV files are UTF-8 (a byte-order mark is skipped); another encoding is an error naming the file
-    and the fix.
+    and the fix. Kept as one function: its format, encoding and ``states`` checks all run before any
+    estimation, so that bad input is refused before work; a third of its length is this docstring.
     """
     if states not in STATES:
         raise ValueError(f"read_record: states='{states}'; expected one of {list(STATES)}")

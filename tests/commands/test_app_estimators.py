@@ -49,10 +49,12 @@ def _cases():
         if "regression" in types:
             out.append((e, "central"))
         if "output_error" in types:
-            # emcee on output error samples a simulated model through the records (half a minute even with short
-            # chains): the slow tier; its regression case keeps its contract in the default tier
-            out.append(pytest.param(e, "output_error", marks=pytest.mark.slow) if e == "emcee" else
-                       (e, "output_error"))
+            # output error simulates the model through the records at every step of the search or the chain
+            # (emcee half a minute even with short chains, DE about ten seconds): the slow tier. Each keeps its
+            # contract in the default tier (test_engine_contract, test_sklearn_contract), and its regression case
+            # here where it has one
+            out.append(pytest.param(e, "output_error", marks=pytest.mark.slow) if e in ("emcee", "de", "de_staged")
+                       else (e, "output_error"))
     return out
 
 

@@ -94,6 +94,7 @@ def test_row_noise_rejects_operators_of_another_size():
         RowNoise([sp.eye(5, 7).tocsr(), sp.eye(4, 7).tocsr()])
 
 
+@pytest.mark.slow  # a statistical check over 12 datasets per structure (16 s): the slow tier
 def test_regression_intervals_have_the_width_of_the_spread_fast(kt):
     """A coarse version of the slow test below (12 datasets): on every structure but seed 000's split diff_center
     the intervals cover the truth and their width matches the actual spread of the estimates (the iid likelihood's

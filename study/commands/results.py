@@ -1,12 +1,16 @@
-"""``python -m study results {rebuild,show}``: the results folder from the command line (the store
-itself is ``study.store``; its folder and columns are described in ``results/README.md``).
+"""``python -m study results {rebuild,show,posterior,restamp,export,import}``: the results folder from
+the command line (the store itself is ``study.store``; its folder and columns are described in
+``results/README.md``).
 
 ``rebuild`` remakes ``runs.parquet`` and ``params.parquet`` from the records; ``show`` counts the
-runs by status and lists the last ten, without writing anything.
+runs by status and lists the last ten, without writing anything; ``export`` packs finished runs
+into a tar archive and ``import`` adds an archive's runs to a folder, so a sweep goes on elsewhere
+(``study.store.transfer``).
 """
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import warnings
 
@@ -55,16 +59,42 @@ def _posterior(store: ResultStore, run_id: str, out: str | None) -> int:
     return 0
 
 
+def _transfer(store: ResultStore, args) -> int:
+    """``export`` / ``import``: exit status 2 on an archive or folder refused (nothing written)."""
+    from study.store.transfer import ArchiveError, export_runs, import_runs
+
+    try:
+        if args.cmd == "export":
+            n = export_runs(store, args.archive, study=args.study, artefacts=not args.no_artefacts)
+            print(f"{n} finished run(s){' of ' + args.study if args.study else ''} written to "
+                  f"{os.path.abspath(args.archive)}" + (" (records only)" if args.no_artefacts else ""))
+            return 0
+        rep = import_runs(store, args.archive)
+    except (ArchiveError, ResultsFolderError) as e:
+        print(f"study results: error: {e}", file=sys.stderr)
+        return 2
+    print(f"{len(rep.added)} run(s) added ({rep.artefact_files} artefact files), {len(rep.kept)} kept as they were "
+          f"(finished here already) in {store.root.resolve()}")
+    runs, _ = store.collect(allow_empty=True)
+    _say(store)
+    print(f"runs: {store.runs_path.resolve()} ({len(runs)} runs)")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
-    """``python -m study results {rebuild,show,posterior} [--root results]``; exit status 1 on an
-    error."""
+    """``python -m study results {rebuild,show,posterior,restamp,export,import} [--root results]``;
+    exit status 1 on an error, 2 on input refused."""
     ap = argparse.ArgumentParser(prog="python -m study results", description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     for name, help_ in (("rebuild", "rebuild runs.parquet and params.parquet from the records"),
                         ("show", "counts by status and the last 10 runs"),
                         ("posterior", "an emcee run's posterior: ArviZ's r-hat and ESS, and a netCDF file"),
                         ("restamp", "give records fingerprinted on their files' bytes the executed-source "
-                                    "fingerprint, where the code is unchanged (then rebuild)")):
+                                    "fingerprint, where the code is unchanged (then rebuild)"),
+                        ("export", "write the finished runs (of one study) to a tar archive (.tar, .tar.gz, "
+                                   ".tar.xz)"),
+                        ("import", "add the runs of such an archive that this folder has not finished; a sweep "
+                                   "then computes only the rest")):
         p = sub.add_parser(name, help=help_)
         p.add_argument("--root", "--results", dest="root", default=None,
                        help="results folder (default $STUDY_RESULTS_DIR or results/)")
@@ -72,15 +102,26 @@ def main(argv: list[str] | None = None) -> int:
             p.add_argument("--allow-empty", action="store_true",
                            help="write empty tables even over non-empty ones (no well-formed record found)")
             p.add_argument("--strict", action="store_true", help="exit 1 when a record was skipped")
+        if name in ("export", "import"):
+            p.add_argument("archive", help="the tar archive to write or read")
+        if name == "export":
+            p.add_argument("--study", default=None, help="only the runs of this study (its config's study)")
+            p.add_argument("--no-artefacts", action="store_true",
+                           help="records only (small enough to commit); figures that read an artefact of these "
+                                "runs find it missing")
         if name == "posterior":
             p.add_argument("run_id", help="the run (runs.parquet's run_id)")
             p.add_argument("--out", default=None, help="write the InferenceData to this netCDF file (.nc)")
     args = ap.parse_args(argv)
     store = ResultStore(args.root)
+    if args.cmd == "import":  # the one command that may make the folder
+        return _transfer(store, args)
     if not store.root.is_dir():  # nothing to show or rebuild: refused, and no folder is made
         print(f"study results: error: --root {args.root or store.root}: no such folder {store.root.resolve()}; "
               "expected a results folder (one a study wrote)", file=sys.stderr)
         return 2
+    if args.cmd == "export":
+        return _transfer(store, args)
     if args.cmd == "posterior":
         return _posterior(store, args.run_id, args.out)
     if args.cmd == "restamp":

@@ -222,3 +222,21 @@ def test_prior_widening_is_one_when_the_records_agree_and_large_when_they_contra
     assert np.all(np.abs(m - theta) < 0.1 * 20 * sd0), m
     m, _, d = gaussian_posterior(X, y, theta + 20 * sd0 * np.array([1, -1, 1]), sd0, widen=False)
     assert d["prior_widening"] == 1.0
+
+
+def test_rounding_in_the_records_null_space_is_not_inverted_into_a_precision(monkeypatch):
+    # a block-robust covariance of 2 blocks has rank 1; what a BLAS kernel leaves in its null space (here -1.2e-15
+    # and 7e-16 of the largest eigenvalue, as measured on one) must count as "not determined", whatever its sign
+    from study.identify.estimators import prior
+
+    rng = np.random.default_rng(0)
+    Q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    cov = Q @ np.diag([0.28, -1.2e-15 * 0.28, 7e-16 * 0.28]) @ Q.T
+    monkeypatch.setattr(prior, "data_covariance", lambda Z, y: (np.zeros(3), cov, 2))
+    X = rng.uniform(size=(10, 3))
+    mean, post_cov, _ = prior.gaussian_posterior(X, rng.normal(size=10), np.zeros(3), np.full(3, np.inf), widen=False)
+    assert np.all(np.isfinite(mean)) and np.all(np.linalg.eigvalsh(post_cov) > 0)
+    # the determined direction keeps the records' variance; the two others are left open (the flat prior's)
+    s = np.sqrt(np.mean(X * X, axis=0))
+    v = np.linalg.eigvalsh(post_cov * np.outer(s, s))
+    assert v[-1] > 1e6 * 0.28 and abs(v[0] - 0.28) < 1e-3 * 0.28  # (eigvalsh beside 1e12: about 1e-4 absolute)

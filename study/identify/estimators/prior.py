@@ -76,6 +76,12 @@ def data_covariance(Z: np.ndarray, y: np.ndarray):
     return np.asarray(ols.params, float), np.asarray(ols.cov_params(), float), G
 
 
+#: eigenvalues of the records' covariance below this share of its largest count as zero (a direction the records do
+#: not determine), not as a precision: a block-robust covariance has rank at most blocks - 1, and the rounding left in
+#: its null space (seen at -1.2e-15 of the largest on one BLAS kernel) would otherwise be inverted into a huge precision
+#: of either sign. Assumption: no direction the records determine is 1e12 times less variable than the best one.
+PRECISION_RTOL = 1e-12
+
 #: the widest the records may make a prior (empirical Bayes, :func:`prior_widening`), in multiples of its stated sd
 PRIOR_SCALE_MAX = 1e6  # effectively unbounded: records may discard a prior they flatly contradict
 
@@ -137,7 +143,7 @@ def gaussian_posterior(X: np.ndarray, y: np.ndarray, mean0: np.ndarray, sd0: np.
         if fit is not None:
             ls, cov_ls = fit
     resid = y - Z @ ls
-    H = np.linalg.pinv(cov_ls, hermitian=True)  # the data's precision of the scaled theta
+    H = np.linalg.pinv(cov_ls, rcond=PRECISION_RTOL, hermitian=True)  # the data's precision of the scaled theta
     tau = prior_widening(ls - mean0 * s, cov_ls, sd0 * s) if widen else 1.0
     P0 = 1.0 / (tau * sd0 * s) ** 2  # 0 where the prior is flat (sd0 = inf)
     A = H + np.diag(P0) + 1e-12 * np.trace(H) / k * np.eye(k)  # the jitter keeps a flat, rank-deficient case solvable

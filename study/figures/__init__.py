@@ -384,5 +384,11 @@ def main(argv=None) -> int:
               "experiment=smoke)", file=sys.stderr)
         return 2
     b = build(results, out, table=not args.no_table, only=set(args.study) if args.study else None)
+    for study in sorted({m[0] for m in b.missing}):
+        lost = sorted(f"{rid}/{name}" for s, rid, name in b.missing if s == study)
+        print(f"study figures: warning: {study}: {len(lost)} artefact(s) its figures read are listed by their runs "
+              f"but in no artefacts folder (records imported without their files?), drawn without them: "
+              f"{', '.join(lost[:5])}{' ...' if len(lost) > 5 else ''}; compute those runs again (force=true on "
+              "their configuration) or import them with their artefacts", file=sys.stderr)
     print(f"{len(b.written)} outputs in {Path(args.out).resolve()}; claims in {Path(args.out) / 'CLAIMS.md'}")
     return 0

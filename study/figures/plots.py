@@ -88,6 +88,9 @@ class Builder:
     #: the study's runs of every status (failed ones too), set for each study by ``build_study``: a claim counts a
     #: failed fit as a loss (:func:`study.figures.verdicts.dataset_errors`)
     all_runs: pd.DataFrame | None = None
+    #: (study, run_id, name) of artefacts a run's record lists that no folder holds (its records were imported
+    #: without their files: ``python -m study results export --no-artefacts``); the figure is drawn without them
+    missing: set = field(default_factory=set)
 
     def artefact(self, run_id: str, name: str) -> bytes | None:
         for root in self.artefact_roots or [self.results]:
@@ -95,7 +98,25 @@ class Builder:
             if p.is_file():
                 self.read.add((run_id, name))
                 return p.read_bytes()
+        if self._listed(run_id, name):
+            study = self.all_runs.loc[self.all_runs["run_id"] == run_id, "cfg_study"] \
+                if "cfg_study" in self.all_runs else pd.Series(dtype=object)
+            self.missing.add((str(study.iloc[0]) if len(study) else "?", run_id, name))
         return None
+
+    def _listed(self, run_id: str, name: str) -> bool:
+        """Whether run ``run_id``'s record lists the artefact ``name`` (a figure probing for an
+        artefact a run never wrote is no loss)."""
+        r = self.all_runs
+        if r is None or "artefacts" not in r:
+            return False
+        hit = r.loc[r["run_id"] == run_id, "artefacts"]
+        if not len(hit) or not isinstance(hit.iloc[0], str):
+            return False
+        try:
+            return name in json.loads(hit.iloc[0])
+        except ValueError:
+            return False
 
     def artefact_csv(self, run_id: str, name: str) -> pd.DataFrame | None:
         b = self.artefact(run_id, name)

@@ -233,3 +233,21 @@ def test_an_unknown_study_is_refused_before_anything_is_written(tmp_path):
     r = subprocess.run([sys.executable, "-m", "study", "figures", "--study", "nope", "--out", str(out)],
                        capture_output=True, text=True, cwd=REPO)
     assert r.returncode == 2 and "--study nope: no such study" in r.stderr and not out.exists()
+
+
+@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
+def test_figures_say_which_artefacts_they_lack_when_runs_arrive_without_their_files(smoke, tmp_path):
+    """Records moved without their artefacts (``results export --no-artefacts``) still build; the figures that
+    read one of those files say so, naming the run and the file."""
+    _, results, _ = smoke
+    cli = [sys.executable, "-m", "study"]
+    for args in (["results", "export", "--root", str(results), "--no-artefacts", str(tmp_path / "r.tar.xz")],
+                 ["results", "import", "--root", str(tmp_path / "bare"), str(tmp_path / "r.tar.xz")]):
+        p = subprocess.run(cli + args, cwd=tmp_path, capture_output=True, text=True, timeout=600)
+        assert p.returncode == 0, p.stderr[-2000:]
+    p = subprocess.run(cli + ["figures", "--results", str(tmp_path / "bare"), "--out", str(tmp_path / "figs")],
+                       cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr[-2000:]
+    warned = [ln for ln in p.stderr.splitlines() if "artefact(s) its figures read are listed by their runs" in ln]
+    assert len(warned) == 1 and warned[0].startswith("study figures: warning: smoke: "), p.stderr[-2000:]
+    assert re.search(r"[0-9a-f]{16}/validation/\S+\.csv", warned[0])

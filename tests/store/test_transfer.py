@@ -95,7 +95,7 @@ def test_an_archive_that_is_not_runs_is_refused_before_any_write(tmp_path, membe
     good = {f"records/{_record(1)['run_id']}.json": json.dumps(_record(1)).encode()}
     (tmp_path / "bad.tar").write_bytes(_tar({**good, **members}))
     dst = ResultStore(tmp_path / "b")
-    with pytest.raises(ArchiveError, match=None) as e:
+    with pytest.raises(ArchiveError) as e:
         import_runs(dst, tmp_path / "bad.tar")
     assert says in str(e.value) and "bad.tar" in str(e.value)
     assert not dst.root.exists()  # not even the folder: the good member was not written either

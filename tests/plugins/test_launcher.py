@@ -2,7 +2,8 @@
 
 * A job's configuration composed from a shared base (jobs differing only in value overrides) is the one Hydra
   composes, node by node (values, node types, flags, metadata): on a sample of ``grand``'s and
-  ``seed001_shallow_water``'s jobs here, on every job of both (and of grand without its sampling axis) with ``-m slow``;
+  ``seed001_shallow_water``'s jobs covering every value of every sweep axis with ``-m slow``, on every job of both
+  (and of grand without its sampling axis) with ``-m long``;
   and the comparison itself finds a difference when there is one.
 * Chunks and array-task groups hold every job exactly once, jobs sharing a composition together.
 * Hydra's semantics, against Hydra's own joblib launcher on a toy app: the JobReturns (status, value, the
@@ -69,8 +70,9 @@ def _compare(experiment: str, pick, extra=()) -> tuple[int, int, dict]:
 
 
 def _shared_sample(jobs, composer, n_keys=3, n_more=6):
-    """All jobs of the first ``n_keys`` group-override sets (composed from one base each), and a spread of
-    others."""
+    """All jobs of the first ``n_keys`` group-override sets (composed from one base each), a spread of others,
+    and enough more that every value of every sweep axis is composed at least once (greedy: the job bringing
+    the most values not yet seen, first)."""
     keys = []
     for job in jobs:
         k = composer.group_key(job)
@@ -80,7 +82,14 @@ def _shared_sample(jobs, composer, n_keys=3, n_more=6):
             break
     first = [job for job in jobs if composer.group_key(job) in keys]
     step = max(1, len(jobs) // n_more)
-    return sorted(first, key=lambda j: keys.index(composer.group_key(j))) + list(jobs[step // 2::step])[:n_more]
+    chosen = sorted(first, key=lambda j: keys.index(composer.group_key(j))) + list(jobs[step // 2::step])[:n_more]
+    seen = {o for job in chosen for o in job}
+    missing = {o for job in jobs for o in job} - seen
+    while missing:
+        best = max(jobs, key=lambda j: len(missing.intersection(j)))
+        chosen.append(best)
+        missing -= set(best)
+    return chosen
 
 
 @pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
@@ -95,11 +104,13 @@ def test_composition_equals_hydras_on_a_sample(experiment):
 
 
 @pytest.mark.slow
+@pytest.mark.long  # about 35 CPU-minutes: Hydra composes each job in about half a second
 @pytest.mark.parametrize("experiment, extra", [("grand", ()), ("seed001_shallow_water", ()),
                                                ("grand", ("noise.sample_dt_LU=null",))])
 def test_shared_composition_equals_hydras_on_every_job(experiment, extra):
     """Every job (grand: 1080, seed001: 1920; grand without its sampling axis: 540), in the order a worker meets
-    them (grouped by group overrides)."""
+    them (grouped by group overrides). The slow tier composes a sample covering every value of every axis
+    (``test_composition_equals_hydras_on_a_sample``); this exhaustive check is run by hand."""
     def every(jobs, composer):
         return [j for c in make_chunks([(i, j) for i, j in enumerate(jobs)], composer.group_key, 1) for _, j in c]
 

@@ -47,7 +47,12 @@ def _real_data() -> bool:
     return (real_data_dir() / "kvlcc2_hsva" / "raw_data").is_dir()
 
 
-@pytest.mark.parametrize("name", [t.name for t in _examples()])
+#: the examples that run a whole diagnosis: the slow tier
+SLOW_EXAMPLES = ("study.api.diagnose_records",)
+
+
+@pytest.mark.parametrize("name", [pytest.param(t.name, marks=pytest.mark.slow) if t.name in SLOW_EXAMPLES else t.name
+                                  for t in _examples()])
 def test_docstring_examples_run(name, tmp_path, monkeypatch):
     """Each verb's examples, run as doctests from an empty folder (the results store, if any, lands there)."""
     if name == "study.api.load_records" and not _real_data():

@@ -121,6 +121,7 @@ def test_covering_sweeper_composes_every_value_once():
     assert len(keep) <= sum(len(v) for v in keys.values()) and len(batch) == 24
 
 
+@pytest.mark.slow
 def test_a_bad_value_anywhere_in_a_sweep_fails_before_any_run(tmp_path):
     # the misspelt option is the last value of an inner key: a covering subset still composes it
     results = tmp_path / "results"

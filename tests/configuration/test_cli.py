@@ -62,6 +62,7 @@ def test_a_setting_that_makes_no_sense_is_refused_naming_it(override, named):
         check_run(conf)
 
 
+@pytest.mark.slow
 def test_the_default_and_every_experiment_pass_the_check():
     for exp in [None] + sorted(p.stem for p in (Path(CONF_DIR) / "experiment").glob("*.yaml")):
         check_run(_compose("config", [f"experiment={exp}"] if exp else []))
@@ -76,6 +77,7 @@ def test_the_cli_refuses_zero_in_one_line_with_status_2_and_writes_nothing(tmp_p
     assert not results.exists()
 
 
+@pytest.mark.slow
 def test_a_sweep_with_one_bad_value_is_refused_before_any_job(tmp_path):
     results = tmp_path / "results"
     p = _cmd("study", "-m", "experiment=tiny", "sim.dt=0.1,-1", f"results_dir={results}",
@@ -99,6 +101,7 @@ def test_a_config_that_does_not_compose_is_one_line(tmp_path):
 
 # --------------------------------------------------------------------------------- failed and skipped runs
 
+@pytest.mark.slow
 def test_a_failed_run_exits_non_zero_and_a_skipped_run_says_why(tmp_path):
     results = tmp_path / "results"
     common = [f"results_dir={results}", f"hydra.run.dir={tmp_path}/o", "experiment=tiny"]
@@ -114,6 +117,7 @@ def test_a_failed_run_exits_non_zero_and_a_skipped_run_says_why(tmp_path):
 
 # ---------------------------------------------------------------------------------------- python -m study simulate
 
+@pytest.mark.slow
 def test_simulate_checks_out_before_simulating(tmp_path):
     p = _cmd("study simulate", cwd=tmp_path)  # out= not given (was "???: unsupported file type")
     assert p.returncode == 2 and _one_line(p).startswith("study simulate: error: out= is required")
@@ -237,7 +241,8 @@ def test_examples_honours_help_and_never_writes_into_committed_folders(tmp_path)
 
 
 @pytest.mark.parametrize("module, committed", [("study reality_check", "paper_figs"),
-                                               ("study turn_prediction", "paper_figs/doctor")])
+                                               pytest.param("study turn_prediction", "paper_figs/doctor",
+                                                            marks=pytest.mark.slow)])
 def test_other_writers_default_outside_the_repository_and_refuse_to_overwrite(tmp_path, module, committed):
     p = _cmd(module, "--help", cwd=tmp_path)
     assert p.returncode == 0 and "--out" in p.stdout and "--overwrite" in p.stdout and not list(tmp_path.iterdir())
@@ -309,6 +314,7 @@ def test_hydra_errors_become_one_line_messages():
                                 "'structure': central, euler")
 
 
+@pytest.mark.slow
 def test_sweep_progress_shows_the_total(tmp_path):
     results = tmp_path / "results"
     p = _cmd("study", "-m", "experiment=tiny", "structure=output_error", "estimator=ls,ridge",

@@ -196,6 +196,7 @@ def test_an_effect_that_removes_less_than_half_of_the_error_is_said_to_explain_i
     assert ("may stand in for a cause no candidate models" in rep["verdict"]) is partly, rep["verdict"]
 
 
+@pytest.mark.slow
 def test_bad_input_is_a_clear_error(tmp_path):
     bad = tmp_path / "bad.csv"
     bad.write_text("time,u,v\n0,1,0\n0.1,1,0\n")

@@ -596,6 +596,7 @@ def test_figures_show_diverged_and_rejected_steps(monkeypatch):
     assert fig.axes[0].get_ylabel() == "residual X [N]" and fig.legends
 
 
+@pytest.mark.slow
 def test_figures_fit_the_page():
     from study.doctor import plots
 

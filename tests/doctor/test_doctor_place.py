@@ -62,6 +62,7 @@ def test_an_unknown_facility_is_refused_naming_file_key_value_and_choices(tmp_pa
         read_record(csv)
 
 
+@pytest.mark.slow
 def test_the_command_refuses_an_unknown_facility_in_one_line(tmp_path, biased):
     csv = tmp_path / "lake.csv"
     csv.write_text("# facility: lake\n" + biased[0][0].to_csv(index=False))

@@ -31,6 +31,7 @@ def report(tmp_path_factory):
     return d, json.loads((out / "report.json").read_text()), (out / "report.html").read_text()
 
 
+@pytest.mark.slow
 def test_a_batch_of_coefficient_sets_replays_as_predict_does(report):
     d, _, _ = report
     pb, fit = d.problem, d.result["final"].fit
@@ -42,6 +43,7 @@ def test_a_batch_of_coefficient_sets_replays_as_predict_does(report):
     assert not np.allclose(frames[1]["r"].to_numpy(), one["r"].to_numpy())  # a draw is another model
 
 
+@pytest.mark.slow
 def test_every_predicted_metric_has_an_interval_around_it_with_its_parts(report):
     _, rep, _ = report
     rows = [r for r in rep["maneuver_metrics"] if math.isfinite(r["final"]) and r["metric"] != "period"]
@@ -66,6 +68,7 @@ def test_every_predicted_metric_has_an_interval_around_it_with_its_parts(report)
     assert any(p["own_sd"].get("rms_yaw_rate", 0) > 0 for p in cal["pairs"])
 
 
+@pytest.mark.slow
 def test_the_report_predicts_both_turns_and_says_they_extrapolate(report):
     _, rep, page = report
     turns = rep["prediction_uncertainty"]["predicted_turns"]
@@ -102,6 +105,7 @@ def test_kvlcc2_from_hsvas_zigzags_the_report_says_the_turn_extrapolates_and_nam
     assert "EXTRAPOLATES beyond the training records" in page and "Nvvr" in page
 
 
+@pytest.mark.slow
 def test_a_part_that_cannot_be_computed_is_said_and_the_rest_is_still_reported(report, monkeypatch):
     from study.doctor import uncertainty
 

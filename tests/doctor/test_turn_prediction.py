@@ -20,6 +20,7 @@ def case():
     return train, truth, perturbed_prior(VESSEL, MMG_HULL, 0.2)
 
 
+@pytest.mark.slow
 def test_identified_hull_predicts_the_truths_turn_and_its_interval_holds_it(case):
     train, truth, prior_cfg = case
     none = Fit((), {}, {}, 0.0)

@@ -200,6 +200,7 @@ def test_grand_figures_are_fit_for_print_and_keep_each_estimators_colour(tmp_pat
     assert all(len(v) == 1 for v in seen.values())  # the same colour and marker with 11 estimators and with 3
 
 
+@pytest.mark.slow
 def test_emcee_figures_are_fit_for_print_and_the_band_is_visible(tmp_path):
     """emcee_kt on a synthetic table with a chain and a posterior-predictive band whose width is a thousandth of
     the motion (as on the exact KT model): the band is drawn again around the posterior median, where it fills

@@ -1,11 +1,14 @@
 """Figures for a sweep of one's own: runs that no named study claims get a generic comparison of what the sweep
 varied, and the command says what it built."""
+import pytest
+
 from study.configuration.compose import compose
 from study.run.executor import run_replicated
 from study.run.pipeline import SimulatedJob
 from study.store import ResultStore
 
 
+@pytest.mark.slow
 def test_a_sweep_of_ones_own_gets_figures_and_is_told_what_they_are(tmp_path, capsys):
     from study.figures import main
 

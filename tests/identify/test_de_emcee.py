@@ -180,8 +180,8 @@ def test_the_polish_is_skipped_when_its_jacobian_is_not_finite(diverging):
     assert np.array_equal(res.x, x) and pb.polish_skipped == skipped + 1
 
 
-@pytest.mark.parametrize("name, kw", [("emcee", {"target_ess": 50, "min_tau_multiple": 5, "max_steps": 500,
-                                                  "init": "local"}),
+@pytest.mark.parametrize("name, kw", [pytest.param("emcee", {"target_ess": 50, "min_tau_multiple": 5, "max_steps": 500,
+                                                               "init": "local"}, marks=pytest.mark.slow),
                                       ("de", {"maxiter": 15})])
 def test_de_and_emcee_finish_with_a_count_of_diverged_candidates(diverging, name, kw):
     """emcee's local start diverges: it starts from DE over the box instead; DE polishes its best member. Both end

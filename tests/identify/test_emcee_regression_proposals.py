@@ -176,6 +176,7 @@ def test_iid_chain_samples_the_closed_form_posterior(kt):
     assert abs(new.diagnostics_["sigma"] / np.sqrt(s2) - 1) < 0.01
 
 
+@pytest.mark.slow
 def test_informative_prior_chain_samples_the_map_posterior(kvlcc2):
     """An informative prior (the MAP estimator's posterior, Gaussian): the chain against it and the DE chain."""
     from study.identify.estimators.prior import gaussian_posterior

@@ -12,6 +12,7 @@ smoothed <= 2 % on every model) plus what the estimator adds by design (regulari
 threshold, a Monte Carlo error).
 """
 import copy
+import functools
 
 import numpy as np
 import pytest
@@ -49,15 +50,17 @@ FAST = {"emcee": dict(target_ess=100, check_every=100, min_steps=200, max_steps=
 MAX_ROWS = 3000  # rows per equation kept for the cross test (evenly spaced: the information is spread)
 
 
+@functools.cache  # asked once per case at collection
 def _regression_estimators():
     out = []
     for e in list_estimators():
         est = make_estimator(e)
         if "regression" in est.problem_types:
             out.append(e)
-    return out
+    return tuple(out)
 
 
+@functools.cache  # asked once per case at collection; callers read it only
 def _exact_vessel(model_name):
     """(vessel config dict, records) on which the model's truth is exact, or None."""
     cfg = read_config("model", model_name)
@@ -104,7 +107,7 @@ _CACHE = {}
 def _prepared(model_name, structure_name, candidates=None):
     key = (model_name, structure_name, candidates)
     if key not in _CACHE:
-        vc = _exact_vessel(model_name)
+        vc = copy.deepcopy(_exact_vessel(model_name))
         vkey = ("records", vc["name"], str(sorted((vc.get("hull") or vc.get("nomoto") or {}).items())))
         if vkey not in _CACHE:
             v = load_vessel(vc)
@@ -143,8 +146,9 @@ def _cases():
     return out
 
 
-#: the estimators whose noise-free recovery takes seconds on a large model (sampling, a sparse library's sweeps)
-_HEAVY = ("emcee", "sindy")
+#: the estimators whose noise-free recovery takes seconds on a large model (sampling, a sparse library's sweeps, an
+#: evolving population)
+_HEAVY = ("emcee", "sindy", "de")
 
 
 def _default_tier(estimator: str, model: str, structure: str) -> bool:
@@ -211,6 +215,7 @@ def test_biased_structures_are_measurably_worse(model_name):
     assert errs["diff_center"] > 10 * errs["central"], errs
 
 
+@pytest.mark.slow
 def test_sindy_library_absorbs_truncation_error():
     """With its degree-3 library SINDy selects no spurious term where the rows are accurate (integral), but on
     central differences of the waterjet USV (its nozzle moves at 20 deg/s, so r has kinks that a central

@@ -44,6 +44,7 @@ def test_two_equations_join_into_one_posterior_with_arviz_diagnostics(tmp_path):
     assert np.array_equal(back.posterior["X.x1"].values, post["X.x1"].values)
 
 
+@pytest.mark.slow
 def test_the_command_prints_the_diagnostics_and_writes_the_file(tmp_path):
     table = REPO / "paper_figs" / "emcee_kt" / "table"
     run = sorted(p.name for p in (table / "artefacts").iterdir() if (p / "chain.npz").exists())[0]

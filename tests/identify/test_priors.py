@@ -93,7 +93,8 @@ def _val_error(res) -> float:
     return float(np.mean([v for k, v in m.items() if k.startswith("val_") and "_nrmse_" in k]))
 
 
-@pytest.mark.parametrize("case", [("kvlcc2", "mmg_hull"), ("kcs", "mmg_hull"), ("usv_waterjet", "usv_full"),
+@pytest.mark.parametrize("case", [pytest.param(("kvlcc2", "mmg_hull"), marks=pytest.mark.slow),
+                                  pytest.param(("kcs", "mmg_hull"), marks=pytest.mark.slow), ("usv_waterjet", "usv_full"),
                                   ("auv", "auv")])
 def test_map_with_a_prior_20_percent_off_is_not_worse_than_least_squares_on_every_vessel_kind(case):
     """On simulated records of each vessel kind (the default training zigzags and random rudder at 1 % noise,

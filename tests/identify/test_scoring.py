@@ -24,6 +24,7 @@ def _table(tmp_path, *overrides) -> tuple[pd.DataFrame, pd.DataFrame]:
     return runs, params
 
 
+@pytest.mark.slow
 def test_scaled_error_is_the_error_times_the_terms_weight_and_tames_near_zero_truths(tmp_path):
     runs, p = _table(tmp_path, "vessel=mariner", "model=abkowitz")
     q = p[p["truth_kind"] == "exact"]
@@ -39,12 +40,14 @@ def test_scaled_error_is_the_error_times_the_terms_weight_and_tames_near_zero_tr
         assert np.isfinite(runs[f"m_drift_median_{eq}"].iloc[0])
 
 
+@pytest.mark.slow
 def test_nomoto_parameters_have_no_term_scale(tmp_path):
     """K, T, ... are not regression columns: no scaled error is made up for them."""
     _, p = _table(tmp_path, "vessel=kt1_mariner", "model=nomoto1")
     assert len(p) and p["scaled_error"].isna().all() and p["rel_error"].notna().all()
 
 
+@pytest.mark.slow
 def test_prior_columns_reach_the_params_table(tmp_path):
     _, p = _table(tmp_path, "estimator=map")
     assert {"prior_mean", "prior_sd", "identifiability"} <= set(p.columns)
@@ -52,6 +55,7 @@ def test_prior_columns_reach_the_params_table(tmp_path):
     assert ((p["identifiability"] > 0) & (p["identifiability"] <= 1.0 + 1e-9)).all()
 
 
+@pytest.mark.slow
 def test_sampling_interval_in_the_ships_time_scale_is_decimated_and_reported(tmp_path):
     """noise.sample_dt_LU: the interval in units of L/U0, rounded to whole simulation steps; every run reports its
     interval in seconds and in L/U0."""

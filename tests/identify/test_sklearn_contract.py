@@ -10,8 +10,14 @@ from study.configuration.compose import read_config
 from study.identify.estimators import list_estimators, make_estimator
 
 
-#: short chains for the sampler: the checks are of the API (clone, shapes, refusals), not of the posterior
-FAST = {"emcee": {"target_ess": 100, "min_tau_multiple": 10, "max_steps": 1000}}
+#: short chains for the sampler, a coarse penalty grid, few folds and generations: the checks are of the API (clone,
+#: shapes, refusals), not of the estimate (accuracy is tested on the ship models, in test_identify.py)
+FAST = {"emcee": {"target_ess": 20, "min_tau_multiple": 5, "min_steps": 40, "check_every": 40, "max_steps": 80,
+                  "n_probes": 4},
+        "lasso": {"alphas": [1.0e-6, 1.0e+6, 13], "cv": 3},
+        "sindy": {"n_splits": 2, "thresholds": [0.001, 0.01, 0.1]},
+        "de": {"maxiter": 30, "popsize": 5},
+        "de_staged": {"maxiter": 30, "popsize": 5}}
 
 
 @pytest.mark.parametrize("name", list_estimators())

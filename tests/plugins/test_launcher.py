@@ -257,6 +257,7 @@ def _outputs(sweep_dir: Path) -> list:
                   and ".submitit" not in p.parts and p.name != "multirun.yaml")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("chdir", [False, True])
 def test_same_job_returns_and_outputs_as_hydras_joblib_launcher(tmp_path, chdir):
     app = _toy(tmp_path / "app")

@@ -77,6 +77,7 @@ def test_invalid_record_is_not_written(tmp_path):
     assert not list(tmp_path.iterdir())
 
 
+@pytest.mark.slow
 def test_simulate_cli_writes_a_valid_record_with_its_hidden_effect(tmp_path):
     out = tmp_path / "zz.csv"
     args = [sys.executable, "-m", "study", "simulate", "vessel=kvlcc2_l7", "maneuver=zigzag_10_10",

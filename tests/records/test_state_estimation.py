@@ -62,7 +62,7 @@ def rel_rmse(est, truth, sel=slice(None)) -> float:
     return float(np.sqrt(np.mean((np.asarray(est)[sel] - truth[sel]) ** 2)) / np.std(truth))
 
 
-@pytest.mark.parametrize("scale", list(SCALES))
+@pytest.mark.parametrize("scale", [pytest.param(s, marks=pytest.mark.slow) if s == "full_scale" else s for s in SCALES])
 def test_u_v_r_from_positions_and_heading_alone(scale):
     vessel, dt, pos_std = SCALES[scale]
     truth = clean_record(vessel, "zigzag_20_20", dt)

@@ -48,6 +48,7 @@ def test_noise_operators_carry_a_sample_perturbation_to_the_rows(kt, name):
     np.testing.assert_allclose(dX, want_x, rtol=1e-5, atol=1e-6 * np.abs(want_x).max())
 
 
+@pytest.mark.slow
 def test_the_noise_model_is_exact_when_its_assumptions_hold():
     """Rows with central-difference noise plus a white part correlated with it, e = (D - 0.3 V) w + 0.2 V u, and
     exact smooth regressors. The fitted noise model whitens the rows (no autocorrelation left), so the GLS
@@ -180,6 +181,7 @@ def test_emcee_samples_the_closed_form_posterior(kt):
                 p, r)
 
 
+@pytest.mark.slow
 def test_the_heterogeneity_check_passes_the_exact_model_on_integral_rows(kt):
     """Integral rows hold the samples at their window's two ends in both the response and the regressors, so a
     row's own fitted value carries the response's noise: groups sorted by it were selected on their noise and
@@ -274,6 +276,7 @@ def test_a_run_says_whether_its_intervals_can_be_trusted(kt_relative, caplog):
     assert dc.metrics["est_N_eiv_reliability_min"] < 0.5
 
 
+@pytest.mark.slow
 def test_finer_sampling_makes_euler_trusted():
     """Without the likelihood's correction (``correct_rows: false``): at 0.02 s euler's truncation falls to about 0.7-1.1 posterior sd (its intervals cover the truth 89 % of the
     time): over 4 datasets the estimate is below 1.3 sd on every one and below the 1 sd line on most, while at 0.1 s

@@ -77,6 +77,7 @@ def _truth() -> dict:
     return make_model("mmg_hull", load_vessel(VESSEL)).truth()[0]
 
 
+@pytest.mark.slow
 def test_a_run_on_files_lands_in_the_table_with_its_records_and_replays(tmp_path, data):
     rec, runs, params = _run(tmp_path, _conf(data))
     assert rec["status"] == "ok", rec["error"]
@@ -212,6 +213,7 @@ def _cli(args, cwd):
                           timeout=600)
 
 
+@pytest.mark.slow
 def test_the_command_line_end_to_end(tmp_path, data):
     results = tmp_path / "results"
     p = _cli([f"train={data}/train_zz*.csv", f"validate={data}/val_zz35.csv", f"results_dir={results}"], tmp_path)

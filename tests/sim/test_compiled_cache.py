@@ -11,6 +11,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 
 CHILD = r"""
@@ -38,6 +40,7 @@ def _child(cache_dir):
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_second_process_loads_every_kernel_from_the_cache(tmp_path):
     first = _child(tmp_path)
     assert all(s["misses"] >= 1 for s in first.values()), first  # a new cache: everything compiled once

@@ -219,6 +219,7 @@ def test_batch_of_64_equals_one_at_a_time():
     assert close(few, got[:, :, 1:6]) < 1e-12
 
 
+@pytest.mark.slow
 def test_batch_loop_is_simd_code_and_the_flag_is_part_of_the_cache_key():
     import llvmlite.binding as llvm
 

@@ -276,6 +276,7 @@ def _assert_close(got, ref, v, rtol):
 # ------------------------------------------------------------------------------------------ tests
 
 
+@pytest.mark.slow
 def test_single_full_zigzag_sequence_matches_reference(setup):
     v, ctrl, cmd, nprop = setup
     y0 = initial_state(v)[:, None]
@@ -291,6 +292,7 @@ def test_single_full_zigzag_sequence_matches_reference(setup):
     assert np.degrees(np.abs(delta)).max() == pytest.approx(20.0)
 
 
+@pytest.mark.slow
 def test_batch_of_64_matches_reference_and_single_runs(setup):
     v, ctrl, cmd, nprop = setup
     P = _batch_params(v)
@@ -311,6 +313,7 @@ def test_batch_of_64_matches_reference_and_single_runs(setup):
     _assert_close(few, got[:, :, 1:6], v, 1e-12)
 
 
+@pytest.mark.slow
 def test_batch_loop_is_simd_code():
     import llvmlite.binding as llvm
 

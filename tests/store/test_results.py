@@ -294,6 +294,7 @@ def _collector(root, stop, errors):
     _exit_child(errors)
 
 
+@pytest.mark.slow
 def test_two_processes_write_and_collect(tmp_path):
     ctx = mp.get_context("spawn")
     root = str(tmp_path / "results")
@@ -556,6 +557,7 @@ def test_app_refuses_an_unwritable_folder_before_any_job(tmp_path):
     assert len(p.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_app_resumes_other_spellings_and_a_failed_collect_exits_nonzero(tmp_path):
     results = tmp_path / "results"
     p = _run_app(_QUICK, tmp_path, results)
@@ -705,6 +707,7 @@ def test_records_hashed_on_bytes_are_restamped_only_where_the_code_is_unchanged(
     assert store.restamp(fingerprint.code_fingerprint, lambda a, b: True) == (1, 0)  # only 3 was left
 
 
+@pytest.mark.slow
 def test_fingerprint_follows_the_source_of_the_components_a_run_uses(tmp_path, monkeypatch):
     import shutil
 

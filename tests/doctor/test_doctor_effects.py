@@ -46,16 +46,11 @@ def test_every_effect_has_an_example():
     assert not missing, f"effects without an example for the generated test: {missing}"
 
 
-#: identified-hull cases of 55-70 s each on two cores, run with -m slow (their known-model cases run by default,
-#: and the identified-hull cases of current, yaw_bias, rudder_interaction and hull_nonlinear stand for them),
-#: keeping the README's test command near 15 minutes
-SLOW_IDENTIFIED = {"shallow_water", "rudder_dynamics", "wind", "propeller_wake"}
-CASES = [pytest.param(e, ident, id=f"{e}-{'identified_hull' if ident else 'known'}",
-                      marks=[pytest.mark.slow] if ident and e in SLOW_IDENTIFIED else [])
+CASES = [pytest.param(e, ident, id=f"{e}-{'identified_hull' if ident else 'known'}")
          for e in EFFECTS for ident in (False, True)]
 
 
-@pytest.mark.slow  # the slow tier: .ci/run runs it after the README's test command
+@pytest.mark.slow  # a doctor run each, 6-12 s with the published hull, 55-70 s with an identified one (2 cores)
 @pytest.mark.parametrize("effect, identified", CASES)
 def test_hidden_effect_is_found_first_halves_the_error_and_is_identified(effect, identified):
     example = effect_config(effect)["example"]

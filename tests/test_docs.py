@@ -153,6 +153,7 @@ def test_the_claims_check_can_fail():
                                                                                       "**holds**")]
 
 
+@pytest.mark.slow
 def test_the_site_builds_strict(tmp_path):
     """``mkdocs build --strict`` from the checkout: every page, link, anchor, figure and the API reference."""
     if shutil.which("mkdocs") is None and not _importable("mkdocs"):

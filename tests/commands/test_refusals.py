@@ -100,16 +100,16 @@ REFUSALS = [
 ]
 
 
-#: the refusals the default tier runs (each command, the trusted-code boundary, a bad record (the doctor's), a bad sweep
-#: value): each is a process start of some seconds, so the slow tier runs the whole list
+#: the refusals the default tier runs (each command, the trusted-code boundary, a bad sweep value): each is a process
+#: start of some seconds, so the slow tier runs the whole list (malformed records are refused in-process by default:
+#: tests/records/test_schema.py)
 DEFAULT_TIER = {"resume='bogus'", "estimator._target_=evilmod.X", "hydra.callbacks.x._target_=shutil.copyfile",
-                "column 'u', row 101", "sim.dt=-1", "os.makedirs", "folder /proc", "'nosuch'", "invalid choice",
-                "--results missing"}
+                "sim.dt=-1", "os.makedirs", "folder /proc", "'nosuch'", "invalid choice", "--results missing"}
 
 
 @pytest.mark.parametrize("module, args, named", [
     pytest.param(m, a, n, id=f"{m} {' '.join(a)}",
-                 marks=() if n in DEFAULT_TIER and (m, n) != ("study", "column 'u', row 101") else pytest.mark.slow)
+                 marks=() if n in DEFAULT_TIER else pytest.mark.slow)
     for m, a, n in REFUSALS])
 def test_a_refusal_leaves_the_launch_folder_empty(tmp_path, records, module, args, named):
     launch = tmp_path / "launch"

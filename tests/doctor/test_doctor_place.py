@@ -125,6 +125,7 @@ def pond_records(wind_speed: float):
     return train, val
 
 
+@pytest.mark.slow
 def test_a_pond_current_faster_than_the_winds_drift_is_rejected_with_the_reason():
     train, val = pond_records(0.5)  # the drift bound: 7 % of 0.5 m/s = 0.035 m/s, the current 0.118 m/s
     opt = Options(candidates=("current", "yaw_bias"))
@@ -202,6 +203,7 @@ def test_another_scale_is_another_setup():
     assert fac.other_setup(("pond", None), [(None, None)]) is None
 
 
+@pytest.mark.slow
 def test_a_turn_predicted_elsewhere_leaves_the_setup_effect_out_unless_asked(biased):
     from study.doctor.turn_prediction import predict_turn
     from study.identify.effects import registry

@@ -47,6 +47,7 @@ def test_fixed_rpm_and_own_self_propulsion_differ_when_resistance_does(case):
     assert np.isfinite(slow["tactical_diameter_L"]) and slow["tactical_diameter_L"] != own["tactical_diameter_L"]
 
 
+@pytest.mark.slow
 def test_cli_without_the_hsva_files_says_so_in_one_line_and_exits_2(tmp_path):
     p = subprocess.run([sys.executable, "-m", "study", "turn_prediction", "--data", str(tmp_path),
                         "--out", str(tmp_path / "out")], capture_output=True, text=True)

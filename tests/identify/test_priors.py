@@ -94,7 +94,7 @@ def _val_error(res) -> float:
 
 
 @pytest.mark.parametrize("case", [pytest.param(("kvlcc2", "mmg_hull"), marks=pytest.mark.slow),
-                                  pytest.param(("kcs", "mmg_hull"), marks=pytest.mark.slow), ("usv_waterjet", "usv_full"),
+                                  pytest.param(("kcs", "mmg_hull"), marks=pytest.mark.slow), pytest.param(("usv_waterjet", "usv_full"), marks=pytest.mark.slow),
                                   ("auv", "auv")])
 def test_map_with_a_prior_20_percent_off_is_not_worse_than_least_squares_on_every_vessel_kind(case):
     """On simulated records of each vessel kind (the default training zigzags and random rudder at 1 % noise,

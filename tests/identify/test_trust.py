@@ -97,6 +97,7 @@ def _neighbours(X: np.ndarray) -> tuple[np.ndarray, list]:
     return np.column_stack([v ** 2, v * r, r ** 2, v ** 2 * r, v * r ** 2, r ** 3]), names
 
 
+@pytest.mark.slow
 def test_the_omitted_terms_test_is_calibrated_where_the_model_holds():
     tails = []
     for s in range(200):

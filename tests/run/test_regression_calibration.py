@@ -248,6 +248,7 @@ def _ident(case, structure, seed=1, **params):
     return identify(case.model, make_structure(structure), cfg, cal.records(case, seed), seed=seed)
 
 
+@pytest.mark.slow
 def test_a_run_says_whether_its_intervals_can_be_trusted(kt_relative, caplog):
     """Through ``identify``: euler at 0.1 s, its truncation (more than 1 posterior sd on K or T) removed by the
     likelihood, is trusted and says what it removed; with ``correct_rows: false`` it is flagged (the run's record

@@ -349,6 +349,7 @@ def test_two_processes_write_and_collect(tmp_path):
 
 # ------------------------------------------------------------------------------------------------------ CLI
 
+@pytest.mark.slow
 def test_cli_rebuild_and_show(tmp_path):
     store = ResultStore(tmp_path / "res")
     run_guarded(store, _conf(), lambda: _result(), seed=0)
@@ -383,6 +384,7 @@ def _cli(*args, cwd):
                           env=env, timeout=300)
 
 
+@pytest.mark.slow
 def test_malformed_misnamed_and_unknown_status_records_are_skipped_named_and_counted(tmp_path):
     store = ResultStore(tmp_path / "res")
     good = run_guarded(store, _conf(), lambda: _result(), seed=0)

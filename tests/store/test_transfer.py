@@ -110,6 +110,7 @@ def test_export_refuses_an_unknown_ending_and_an_empty_selection(tmp_path):
     assert not list(tmp_path.glob("x.*")) and not list(tmp_path.glob(".x.*"))
 
 
+@pytest.mark.slow
 def test_the_command_line_exports_imports_and_refuses_with_one_line(tmp_path):
     _store(tmp_path)
     cli = [sys.executable, "-m", "study", "results"]

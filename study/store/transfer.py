@@ -17,7 +17,9 @@ from __future__ import annotations
 import json
 import os
 import re
+import shutil
 import tarfile
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
@@ -91,20 +93,33 @@ def export_runs(store, dest: str | os.PathLike, study: str | None = None, artefa
     return len(records)
 
 
-def _read_members(src: Path) -> tuple[dict, dict]:
-    """``({run_id: record}, {run_id: {relative name: bytes}})`` of the archive ``src``, every
-    member checked first (:class:`ArchiveError` on the first one that is not as expected)."""
+def _open(src: Path) -> tarfile.TarFile:
     try:
-        tar = tarfile.open(src, "r:*")
+        return tarfile.open(src, "r:*")
     except FileNotFoundError:
         raise ArchiveError(f"{src}: no such file; expected a tar archive of runs (python -m study results "
                            "export)") from None
     except (tarfile.TarError, OSError):
         raise ArchiveError(f"{src}: not a readable tar archive (plain, gzip, bzip2 or xz); expected one written by "
                            "python -m study results export") from None
+
+
+def _artefact_member(m: tarfile.TarInfo) -> tuple[str, str] | None:
+    """``(run id, relative name)`` of an artefact member, or None."""
+    parts = PurePosixPath(m.name).parts
+    if m.isfile() and len(parts) >= 3 and parts[0] == "artefacts" and _RUN_ID.fullmatch(parts[1]):
+        return parts[1], PurePosixPath(*parts[2:]).as_posix()
+    return None
+
+
+def _read_members(src: Path, staging: Path) -> tuple[dict, dict]:
+    """``({run_id: record}, {run_id: [relative artefact names]})`` of the archive ``src``, every
+    member checked first (:class:`ArchiveError` on the first one that is not as expected). Each
+    artefact is copied to ``staging/<run_id>/<name>`` on the way (streamed: an archive of large
+    traces is not held in memory)."""
     records, files = {}, {}
-    with tar:
-        for m in tar.getmembers():
+    with _open(src) as tar:
+        for m in tar:
             parts = PurePosixPath(m.name).parts
             if m.isdir() and parts and parts[0] in ("records", "artefacts"):
                 continue
@@ -125,8 +140,12 @@ def _read_members(src: Path) -> tuple[dict, dict]:
                 if errs:
                     raise ArchiveError(f"{src}: member {m.name}: not a run record: {'; '.join(errs)}")
                 records[stem] = rec
-            elif len(parts) >= 3 and parts[0] == "artefacts" and _RUN_ID.fullmatch(parts[1]):
-                files.setdefault(parts[1], {})[PurePosixPath(*parts[2:]).as_posix()] = tar.extractfile(m).read()
+            elif (art := _artefact_member(m)) is not None:
+                files.setdefault(art[0], []).append(art[1])
+                dest = staging.joinpath(*art)
+                dest.parent.mkdir(parents=True, exist_ok=True)
+                with tar.extractfile(m) as fin, open(dest, "wb") as fout:
+                    shutil.copyfileobj(fin, fout)
             else:
                 raise ArchiveError(f"{src}: member {m.name!r}: expected records/<run_id>.json or "
                                    "artefacts/<run_id>/<file>")
@@ -144,6 +163,10 @@ def import_runs(store, src: str | os.PathLike) -> ImportReport:
     failed, which is kept under ``records/failed/`` as any retried run's) is written with its
     artefacts; each it has finished is kept. The whole archive is checked before the first write.
 
+    The artefacts are streamed to a temporary folder while the archive is checked, then moved into
+    the store run by run: the import needs the memory of one member, not of the archive (and, for
+    the while, the disk of its artefacts).
+
     Raises
     ------
     ArchiveError
@@ -151,19 +174,25 @@ def import_runs(store, src: str | os.PathLike) -> ImportReport:
         artefact (named in the message); nothing has been written.
     """
     src = Path(src)
-    records, files = _read_members(src)
-    store.check_writable()
     report = ImportReport()
-    for rid in sorted(records):
-        if store.finished(rid):
-            report.kept.append(rid)
-            continue
-        arts = files.get(rid) or {}
-        try:
-            store.write(records[rid], artefacts=arts or None)
-        except FileExistsError:  # finished meanwhile by a sweep writing to the same folder
-            report.kept.append(rid)
-            continue
-        report.added.append(rid)
-        report.artefact_files += len(arts)
+    with tempfile.TemporaryDirectory(prefix="study-import-") as staging:
+        records, files = _read_members(src, Path(staging))
+        store.check_writable()
+        for rid in sorted(records):
+            if store.finished(rid):
+                report.kept.append(rid)
+            else:
+                _add(store, records[rid], {n: Path(staging, rid, n) for n in files.get(rid, ())}, report)
     return report
+
+
+def _add(store, record: dict, artefacts: dict, report: ImportReport) -> None:
+    """Write one run (its artefacts: files moved into the store), or count it kept when a sweep
+    writing to the same folder finished it meanwhile."""
+    try:
+        store.write(record, artefacts=artefacts or None)
+    except FileExistsError:
+        report.kept.append(record["run_id"])
+        return
+    report.added.append(record["run_id"])
+    report.artefact_files += len(artefacts)

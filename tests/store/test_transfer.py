@@ -48,6 +48,38 @@ def test_export_then_import_carries_finished_runs_and_their_artefacts(tmp_path):
     assert sorted(again.kept) == sorted(rep.added) and again.added == [_record(2, study="other")["run_id"]]
 
 
+def test_artefacts_stream_in_any_member_order_and_never_as_bytes(tmp_path, monkeypatch):
+    """An archive whose members come in another order (artefacts before their record, runs interleaved) imports the
+    same; each artefact reaches the store as a file, not as bytes held in memory."""
+    src = ResultStore(tmp_path / "a")
+    for seed in range(3):
+        src.write(_record(seed), artefacts={"validation/zz.csv": f"t,psi\n{seed},0\n".encode(),
+                                            "fit/rows.csv": f"x\n{seed}\n".encode()})
+    export_runs(src, tmp_path / "x.tar")
+    with tarfile.open(tmp_path / "x.tar") as tar:
+        members = [(m, tar.extractfile(m).read() if m.isfile() else None) for m in tar.getmembers()]
+    with tarfile.open(tmp_path / "shuffled.tar.gz", "w:gz") as tar:
+        for m, data in reversed(members):
+            tar.addfile(m, io.BytesIO(data) if data is not None else None)
+    written = []
+    original = ResultStore.write
+
+    def spy(self, record, overwrite=False, artefacts=None):
+        written.append({k: type(v) for k, v in (artefacts or {}).items()})
+        return original(self, record, overwrite=overwrite, artefacts=artefacts)
+
+    monkeypatch.setattr(ResultStore, "write", spy)
+    dst = ResultStore(tmp_path / "b")
+    rep = import_runs(dst, tmp_path / "shuffled.tar.gz")
+    assert len(rep.added) == 3 and rep.artefact_files == 6
+    assert all(t is not bytes for w in written for t in w.values()) and len(written) == 3
+    for seed in range(3):
+        rid = _record(seed)["run_id"]
+        assert dst.read(rid) == src.read(rid)
+        assert (dst.artefact_dir(rid) / "validation" / "zz.csv").read_text() == f"t,psi\n{seed},0\n"
+        assert (dst.artefact_dir(rid) / "fit" / "rows.csv").read_text() == f"x\n{seed}\n"
+
+
 def test_records_only_keep_their_artefact_list(tmp_path):
     src = _store(tmp_path)
     export_runs(src, tmp_path / "r.tar", artefacts=False)

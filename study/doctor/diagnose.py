@@ -23,7 +23,9 @@ the verdict.
 5. **Ladder**: the missing effect is added (its parameters refined on the training replays), the
    remaining candidates ranked again on top of it, and so on while a significant one remains. A step
    whose validation error, refined, is not at least ``min_improvement`` lower than the step before
-   is rejected: the ladder stops and says why.
+   is rejected: the ladder stops and says why. So is a step after the first that is named in half
+   or fewer of the leave-one-out repetitions of step 4 (the first is reported with its count
+   whatever it is: it explains the baseline's error; a further step explains what is left of it).
 6. **The place** (``study.records.facility``): a candidate that needs what the training records'
    facility lacks (wind indoors, a current in still water) is not tried; a fitted candidate that is
    physically implausible there (a pond's current faster than the wind's drift) is rejected with the
@@ -325,6 +327,16 @@ class Doctor:
             if m is None:
                 if step == 0:
                     stab.append(st)
+                break
+            if step > 0 and st.get("k") is not None and 2 * st["k"] <= st["n"]:
+                # a further effect on top of a named one is a small fall of a small error: it must not hang on
+                # which validation record is scored (a free depth was measured to pass on positions-only records
+                # for the hull's bias from the estimated velocities, named in 1 of 2)
+                why = (f"is named in only {st['k']} of {st['n']} with one validation record left out in turn: the "
+                       "records do not settle a further effect")
+                ladder.append(self._ladder_row(f"+ {m}", evs[m], scored, rejected=True, reason=why))
+                notes.append(f"ladder step + {m} rejected: it {why}; the ladder stops at the step before")
+                stab.append(st)
                 break
             key = self.key(ranking_base.effects + (m,))
             cand = self.evaluate(key, start=ranking_base.fit.outer, refine=True)

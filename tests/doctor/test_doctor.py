@@ -146,10 +146,14 @@ def test_too_little_excitation_is_said():
 
 
 def scaled(ev, effects, f):
-    """A stand-in evaluation of ``effects``: the baseline's errors times ``f`` (to test the decision rules)."""
-    errs = {r: {c: ({"rmse": e["rmse"] * f, "nrmse": e["nrmse"] * f} if isinstance(e, dict) else e)
-                for c, e in es.items()} for r, es in ev.errors.items()}
-    return Evaluation(tuple(effects), ev.fit, errs, ev.validation_error * f, ev.training_error, 0.0)
+    """A stand-in evaluation of ``effects``: the baseline's errors times ``f`` (to test the decision rules), or
+    times ``f[i]`` on the i-th validation record."""
+    fs = list(f) if isinstance(f, (list, tuple)) else [f] * len(ev.errors)
+    errs = {r: {c: ({"rmse": e["rmse"] * fr, "nrmse": e["nrmse"] * fr} if isinstance(e, dict) else e)
+                for c, e in es.items()} for (r, es), fr in zip(ev.errors.items(), fs)}
+    out = Evaluation(tuple(effects), ev.fit, errs, math.nan, ev.training_error, 0.0)
+    out.validation_error = float(out.per_record().mean())
+    return out
 
 
 def test_two_candidates_within_the_tie_are_reported_as_indistinguishable(monkeypatch):
@@ -323,6 +327,39 @@ def test_a_ladder_step_that_raises_the_error_is_rejected(monkeypatch):
     assert rep["ladder"][1]["rejected"] and "not below" in rep["ladder"][1]["reason"]
     assert len(rep["ladder"]) == 2 and rep["missing_effect"] is None
     assert any("rejected" in n for n in rep["notes"]) and "current, was rejected" in rep["verdict"]
+
+
+def test_a_further_step_that_hangs_on_one_validation_record_is_rejected(monkeypatch):
+    """current is named (both validation records' errors fall by 60 %); on top of it yaw_bias lowers the mean
+    error by a quarter, but all of it on one record: with either record left out it is named once in two, so the
+    ladder stops after current and says why. Named on both records, the same step is taken."""
+    train, val = records([], duration=60.0)
+    assert len(val) == 2
+
+    def diagnose_with(second):
+        d = Doctor(VESSEL, KNOWN, train, val, Options(candidates=("current", "yaw_bias"), checks="off"))
+        real = Doctor.evaluate
+
+        def fake_evaluate(self, effects, start=None, fixed=(), refine=False):
+            ev = real(self, (), start, fixed, False)
+            if not effects:
+                return ev
+            f = 0.4 if effects == ("current",) else 0.97 if effects == ("yaw_bias",) else [0.4 * x for x in second]
+            out = scaled(ev, effects, f)
+            self.evaluations[(self.key(effects), bool(fixed), refine)] = out  # the ladder reads its steps back
+            return out
+
+        monkeypatch.setattr(Doctor, "evaluate", fake_evaluate)
+        d.run()
+        return d.report()
+
+    rep = diagnose_with([0.45, 1.0])
+    assert rep["missing_effect"] == "current"
+    assert [s["step"] for s in rep["ladder"]] == ["baseline", "+ current", "+ yaw_bias"]
+    assert rep["ladder"][2]["rejected"] and "named in only 1 of 2" in rep["ladder"][2]["reason"]
+    assert "then" not in rep["verdict"] and any("+ yaw_bias rejected" in n for n in rep["notes"])
+    rep = diagnose_with([0.7, 0.75])
+    assert not rep["ladder"][2].get("rejected") and "then yaw_bias" in rep["verdict"], rep["verdict"]
 
 
 def test_a_flipped_rudder_is_refused_before_fitting():

@@ -37,6 +37,10 @@ CASES = {
     "wind_300": ({"environment": [{"name": "wind", "speed_U0": 3.0, "direction_deg": 300.0}]}, VESSEL, False, 300.0),
     "wind_300_pose": ({"environment": [{"name": "wind", "speed_U0": 3.0, "direction_deg": 300.0}]},
                       VESSEL, True, 300.0),
+    # two effects of different kinds at once, positions and heading only: both must be named
+    "wind_and_current_pose": ({"environment": [{"name": "wind", "speed_U0": 3.0, "direction_deg": 300.0},
+                                               {"name": "current", "speed_U0": 0.06, "direction_deg": 80.0}]},
+                              VESSEL, True, 300.0),
     "sea_trial_current_pose": ({"environment": [{"name": "current", "speed_U0": 0.08, "direction_deg": 135.0}]},
                                FULL, True, 1800.0),
     "nothing_hidden": ({}, VESSEL, False, 300.0),

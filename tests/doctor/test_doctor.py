@@ -176,12 +176,9 @@ def test_two_candidates_within_the_tie_are_reported_as_indistinguishable(monkeyp
     assert len(rep["ladder"]) == 1
 
 
-@pytest.mark.parametrize("share, partly", [(0.7, True), (0.3, False)])
-def test_an_effect_that_removes_less_than_half_of_the_error_is_said_to_explain_it_in_part(monkeypatch, share,
-                                                                                          partly):
-    """A named effect that lowers the validation error by 30 % may stand in for a cause no candidate models (a
-    larger added mass passes for a rudder-hull interaction): the verdict says so; at 70 % it does not."""
-    train, val = records([], duration=60.0)
+def diagnose_scaled(monkeypatch, train, val, factor):
+    """The doctor's report with every candidate evaluation replaced by the baseline's errors times
+    ``factor(effects)`` (a number, or one per validation record), each stored where the ladder reads its steps."""
     d = Doctor(VESSEL, KNOWN, train, val, Options(candidates=("current", "yaw_bias"), checks="off"))
     real = Doctor.evaluate
 
@@ -189,13 +186,22 @@ def test_an_effect_that_removes_less_than_half_of_the_error_is_said_to_explain_i
         ev = real(self, (), start, fixed, False)
         if not effects:
             return ev
-        out = scaled(ev, effects, share if effects[-1] == "current" else 0.97)
+        out = scaled(ev, effects, factor(tuple(effects)))
         self.evaluations[(self.key(effects), bool(fixed), refine)] = out  # the ladder reads its steps back
         return out
 
     monkeypatch.setattr(Doctor, "evaluate", fake_evaluate)
     d.run()
-    rep = d.report()
+    return d.report()
+
+
+@pytest.mark.parametrize("share, partly", [(0.7, True), (0.3, False)])
+def test_an_effect_that_removes_less_than_half_of_the_error_is_said_to_explain_it_in_part(monkeypatch, share,
+                                                                                          partly):
+    """A named effect that lowers the validation error by 30 % may stand in for a cause no candidate models (a
+    larger added mass passes for a rudder-hull interaction): the verdict says so; at 70 % it does not."""
+    train, val = records([], duration=60.0)
+    rep = diagnose_scaled(monkeypatch, train, val, lambda effects: share if effects[-1] == "current" else 0.97)
     assert rep["missing_effect"] == "current"
     assert ("may stand in for a cause no candidate models" in rep["verdict"]) is partly, rep["verdict"]
 
@@ -337,21 +343,8 @@ def test_a_further_step_that_hangs_on_one_validation_record_is_rejected(monkeypa
     assert len(val) == 2
 
     def diagnose_with(second):
-        d = Doctor(VESSEL, KNOWN, train, val, Options(candidates=("current", "yaw_bias"), checks="off"))
-        real = Doctor.evaluate
-
-        def fake_evaluate(self, effects, start=None, fixed=(), refine=False):
-            ev = real(self, (), start, fixed, False)
-            if not effects:
-                return ev
-            f = 0.4 if effects == ("current",) else 0.97 if effects == ("yaw_bias",) else [0.4 * x for x in second]
-            out = scaled(ev, effects, f)
-            self.evaluations[(self.key(effects), bool(fixed), refine)] = out  # the ladder reads its steps back
-            return out
-
-        monkeypatch.setattr(Doctor, "evaluate", fake_evaluate)
-        d.run()
-        return d.report()
+        return diagnose_scaled(monkeypatch, train, val, lambda effects: 0.4 if effects == ("current",) else 0.97
+                               if effects == ("yaw_bias",) else [0.4 * x for x in second])
 
     rep = diagnose_with([0.45, 1.0])
     assert rep["missing_effect"] == "current"

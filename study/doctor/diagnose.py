@@ -329,9 +329,8 @@ class Doctor:
                     stab.append(st)
                 break
             if step > 0 and st.get("k") is not None and 2 * st["k"] <= st["n"]:
-                # a further effect on top of a named one is a small fall of a small error: it must not hang on
-                # which validation record is scored (a free depth was measured to pass on positions-only records
-                # for the hull's bias from the estimated velocities, named in 1 of 2)
+                # a further effect explains what is left after a named one, a small error: it must not hang on
+                # which validation record is scored. The row shows its ranking fit (not refined: it is not taken)
                 why = (f"is named in only {st['k']} of {st['n']} with one validation record left out in turn: the "
                        "records do not settle a further effect")
                 ladder.append(self._ladder_row(f"+ {m}", evs[m], scored, rejected=True, reason=why))

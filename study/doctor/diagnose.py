@@ -370,6 +370,7 @@ class Doctor:
                        "ambiguous": ambiguous, "ladder": ladder, "notes": notes, "stability": stab,
                        "separating": separating,
                        "pair_evaluations": {e: first_evs[e] for e in (separating or {}).get("pair", [])},
+                       "tie_evaluations": {e: first_evs[e] for e in ambiguous},
                        "diverged": diverged, "scored": scored, "ladder_fits": ladder_fits,
                        "seconds": time.perf_counter() - t0}
         return self.result

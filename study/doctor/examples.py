@@ -133,6 +133,13 @@ def _turns(rep: dict) -> list:
             out += ["", f"Predicted {t['maneuver']}: tactical diameter {td['value']:.2f} L (90 %: {td['low']:.2f}-"
                         f"{td['high']:.2f}); {t['extrapolation']['text']}" + (f"; carried by {who}" if who else "")
                     + "."]
+    for t in ((rep.get("prediction_uncertainty") or {}).get("tie") or {}).get("turns", []):
+        if "metrics" not in t:
+            continue
+        td = t["metrics"]["tactical_diameter_L"]
+        each = "; ".join(f"{e} {x['value']:.2f} L ({x['low']:.2f}-{x['high']:.2f})" for e, x in td["readings"].items())
+        out += ["", f"The verdict is a tie; {t['maneuver']} as each reading predicts it: {each}; weighted equally "
+                    f"{td['value']:.2f} L (90 %: {td['low']:.2f}-{td['high']:.2f})."]
     return out
 
 

@@ -1,7 +1,8 @@
 """The view data of the report's section on how far the predictions can be trusted
 (``prediction_uncertainty`` in ``report.json``, written by ``study.doctor.uncertainty``): the
 plain summary first (which predictions extrapolate, how far, in which states, and which
-coefficients carry them), then the predicted 35 deg turns with their intervals, the validation
+coefficients carry them), then the predicted 35 deg turns with their intervals (and, when the
+verdict is a tie, as each tied reading predicts them and mixed), the validation
 metrics' intervals and carriers, the calibration of the extrapolation error, the models counted
 as indistinguishable, and the method with what it does not cover
 (``templates/uncertainty.html.j2`` lays it out). A part the section does not have is left out;
@@ -44,6 +45,19 @@ def _turn(t: Mapping) -> dict:
             "metrics": metrics, "alternatives": ", ".join(map(str, t.get("alternatives") or [])) or "none"}
 
 
+def _tie(sec: Mapping) -> dict | None:
+    """The turns as each tied reading predicts them, and their equal mixture."""
+    tie = sec.get("tie") or {}
+    turns = []
+    for t in tie.get("turns") or []:
+        rows = [{"metric": str(m), "value": num(d.get("value")), "interval": interval(d.get("low"), d.get("high")),
+                 "readings": "; ".join(f"{e} {num(x.get('value'))} ({num(x.get('low'))}-{num(x.get('high'))})"
+                                       for e, x in (d.get("readings") or {}).items())}
+                for m, d in (t.get("metrics") or {}).items()]
+        turns.append({"maneuver": as_text(t.get("maneuver")), "rows": rows})
+    return {"readings": " and ".join(map(str, tie.get("readings") or [])), "turns": turns} if turns else None
+
+
 def _validation(r: Report, sec: Mapping) -> dict | None:
     recs = [{"record": str(n), "text": as_text(x.get("text"))}
             for n, x in ((sec.get("final") or {}).get("records") or {}).items()]
@@ -82,5 +96,6 @@ def uncertainty_view(r: Report) -> dict | None:
     if not sec:
         return None
     return {"summary": [str(s) for s in sec.get("summary") or []],
-            "turns": [_turn(t) for t in sec.get("predicted_turns") or []], "validation": _validation(r, sec),
+            "turns": [_turn(t) for t in sec.get("predicted_turns") or []], "tie": _tie(sec),
+            "validation": _validation(r, sec),
             "calibration": _calibration(sec), "method": as_text(sec.get("method"))}

@@ -173,6 +173,37 @@ def combine(value: float, s_id: float, s_struct: float, s_extrap: float, level: 
             "half_width": float(math.exp(w) - 1.0)}
 
 
+def tie_mixture(readings, level: float = 0.9) -> dict:
+    """The interval of a metric when the records cannot tell two or more readings of them apart
+    (the doctor's verdict is a tie): ``readings`` holds each reading's ``(value, low, high)``,
+    its own ``level`` interval from :func:`combine` (value * exp(+-z s): a normal of sd s on the
+    log scale). The readings are weighted equally -- a tie says the records favour none
+    (assumption) -- and the result is the central ``level`` share of that mixture, its median as
+    the value. Choosing one reading would give an interval that holds only its own world; the
+    mixture holds each in proportion. Returns ``{'value', 'low', 'high', 'half_width', 'n'}``
+    (half_width: (high - low) / (2 value)); NaNs when a reading has no interval."""
+    z = z_of(level)
+    mus, sds = [], []
+    for value, low, high in readings:
+        vals = (float(value), float(low), float(high))
+        if not all(math.isfinite(x) and x > 0 for x in vals) or not vals[1] <= vals[0] <= vals[2]:
+            return {"value": math.nan, "low": math.nan, "high": math.nan, "half_width": math.nan,
+                    "n": len(readings)}
+        mus.append(math.log(vals[0]))
+        sds.append(max((math.log(vals[2]) - math.log(vals[1])) / (2.0 * z), 1e-12))
+    mus, sds = np.array(mus), np.array(sds)
+    if len(mus) == 0:
+        raise ValueError("tie_mixture: no reading given")
+
+    def quantile(p: float) -> float:
+        lo, hi = float(np.min(mus - 10 * sds)), float(np.max(mus + 10 * sds))
+        return optimize.brentq(lambda x: float(np.mean(stats.norm.cdf((x - mus) / sds))) - p, lo, hi)
+
+    a = (1.0 - level) / 2.0
+    med, low, high = (math.exp(quantile(p)) for p in (0.5, a, 1.0 - a))
+    return {"value": med, "low": low, "high": high, "half_width": (high - low) / (2.0 * med), "n": int(len(mus))}
+
+
 # ---------------------------------------------------------------------------------------------- envelope
 def running(frame, measured=None, share: float = PROPELLER_RUNNING):
     """``frame`` restricted to the samples where the propeller runs at ``share`` of its median

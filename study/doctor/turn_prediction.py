@@ -57,7 +57,7 @@ FILES = ("kvlcc2_turn_from_zigzags.csv", "kvlcc2_turn_from_zigzags.md")
 #: the KVLCC2 cases: (label, anchor, effects); the first identified one is the doctor's default
 CASES = (
     ("hull identified, anchored 30 % (the doctor's default)", 0.3, ()),
-    ("+ yaw bias (the doctor's verdict; a set-up effect, left out of the turn)", 0.3, ("yaw_bias",)),
+    ("+ yaw bias (a set-up effect, left out of the turn)", 0.3, ("yaw_bias",)),
     ("+ yaw bias, kept in the turn (keep_setup_effects)", 0.3, ("yaw_bias",)),
     ("+ yaw bias + rudder interaction (t_R, a_H, x_R free)", 0.3, ("yaw_bias", "rudder_interaction")),
     ("+ propeller wake (w_P0, t_P free)", 0.3, ("propeller_wake",)),
@@ -66,6 +66,13 @@ CASES = (
     ("+ propeller from the measured thrust (w_P0 from thrust, t_P free)", 0.3, ("propeller_thrust",)),
     ("hull identified, unanchored least squares", 0.0, ()),
 )
+
+
+#: the doctor's verdict on these records with the hull identified (``python -m study doctor_examples``, the
+#: case ``kvlcc2_hsva_identified``): a tie between the rudder's inflow and a yaw bias, whose cases these are
+TIE = ("+ yaw bias (a set-up effect, left out of the turn)",
+       "+ rudder inflow (gamma_R to either side, l_R, epsilon free)")
+TIE_LABEL = "the doctor's verdict, a tie: the yaw bias (left out) and rudder inflow rows weighted equally"
 
 
 def _case_alternatives(cases: list, k: int, tie: float = 0.1) -> list:
@@ -133,11 +140,26 @@ def kvlcc2_hsva_table(data_dir=None, draws: int = 64) -> pd.DataFrame:
                         f"distance_{key}": got["extrapolation"]["distance"]})
         rows.append(row)
         details[label] = side
+    rows.append(tie_row(details))
     df = pd.DataFrame(rows)
     for key in ("stbd", "port"):
         df[f"TD_{key}_vs_published_pct"] = 100.0 * (df[f"TD_L_{key}"] / df.loc[0, f"TD_L_{key}"] - 1.0)
     df.attrs.update(u0=u0, n_tank=n_tank, records=[r.meta.get("name") for r in train], details=details)
     return df
+
+
+def tie_row(details: dict) -> dict:
+    """The row of the doctor's tie (:data:`TIE`): per side the equal mixture of the tied readings'
+    tactical-diameter intervals (``prediction_interval.tie_mixture``)."""
+    from .prediction_interval import tie_mixture
+
+    row = {"model": TIE_LABEL, "setup_left_out": "yaw_bias (in its reading)"}
+    for key in ("stbd", "port"):
+        tds = [details[label][key]["metrics"]["tactical_diameter_L"] for label in TIE]
+        mix = tie_mixture([(td["value"], td["low"], td["high"]) for td in tds])
+        row.update({f"TD_L_{key}": mix["value"], f"TD_L_{key}_low": mix["low"], f"TD_L_{key}_high": mix["high"],
+                    f"distance_{key}": max(details[label][key]["extrapolation"]["distance"] for label in TIE)})
+    return row
 
 
 def _interval(v, lo, hi) -> str:
@@ -188,7 +210,10 @@ def write_table(df: pd.DataFrame, out: Path, draws: int = 64) -> list[Path]:
         "doubled) and an extrapolation error calibrated on the training zigzags held out in turn, growing with the "
         "distance outside their envelope (study/doctor/predictions.py, METHOD). An effect of HSVA's test set-up "
         "(the yaw bias: HSVA's report says its rudder was deflected from the geometric zero) is left out of a turn "
-        "predicted for another basin unless kept (keep_setup_effects).\n\n"
+        "predicted for another basin unless kept (keep_setup_effects). The last row is the doctor's answer for "
+        "another basin: with the hull identified it cannot tell a yaw bias (HSVA's set-up, left out) from the "
+        "rudder's inflow on these records, so the turn is the equal mixture of the two readings' intervals, its "
+        "median as the value (study/doctor/prediction_interval.py, tie_mixture).\n\n"
         + show.to_markdown(index=False, floatfmt=".3g") + "\n\n"
         f"## Where the doctor's default hull ({default}) predicts the turn, and what carries it\n\n"
         + "\n".join(lines) + "\n")

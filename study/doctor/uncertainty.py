@@ -15,7 +15,9 @@ and the extrapolation error is calibrated once on all training records (an appro
 own calibrations would each leave one record out). ``predicted_turns`` adds what the final model
 predicts for a standard 35 deg turning circle to either side from a steady approach at the service
 speed, a manoeuvre nobody measured
-(``study.doctor.predictions.predict_turn``).
+(``study.doctor.predictions.predict_turn``). When the verdict is a tie, ``tie`` gives those turns as
+each tied reading predicts them and their equal mixture: the records favour neither reading, so the
+prediction is not conditioned on one.
 """
 from __future__ import annotations
 
@@ -206,6 +208,41 @@ def predicted_turns(doctor, ev, tie: float, level: float = 0.9) -> list:
     return out
 
 
+def tie_turns(doctor, tie: float, level: float = 0.9) -> dict | None:
+    """When the verdict is a tie, the 35 deg turns as each tied reading predicts them (its
+    equation-error fit, set-up effects left out as for the final model's turns) and their equal
+    mixture (``prediction_interval.tie_mixture``): the records favour neither reading, so the
+    turn is not conditioned on one. None without a tie. Returns ``{'readings', 'turns': [{'maneuver',
+    'metrics': {metric: {'value', 'low', 'high', 'half_width', 'readings': {effect: {'value',
+    'low', 'high'}}}}}]}``."""
+    from .predictions import TURN_METRICS, predict_turn
+
+    evs = doctor.result.get("tie_evaluations") or {}
+    if len(evs) < 2:
+        return None
+    turns = []
+    for title, man in TURNS:
+        got = {}
+        try:
+            for effect, ev in evs.items():
+                others = [(label, doctor.problem, e.fit) for label, e in alternative_evaluations(doctor, ev, tie)[0]]
+                settings, _ = setting_alternatives(doctor, ev.fit, tie)
+                got[effect] = predict_turn(doctor.problem, ev.fit, draws=2 * DRAWS, maneuver=man, level=level,
+                                           keep_setup_effects=doctor.opt.keep_setup_effects,
+                                           alternatives=others + settings, tie=tie, cal=calibration(doctor, ev.fit))
+        except ValueError as e:  # a kind without a propeller to solve for, ...: as predicted_turns says it
+            turns.append({"maneuver": title, "why": str(e)})
+            continue
+        metrics = {}
+        for m in TURN_METRICS:
+            each = {e: {k: g["metrics"][m][k] for k in ("value", "low", "high")} for e, g in got.items()}
+            mix = pi.tie_mixture([(x["value"], x["low"], x["high"]) for x in each.values()], level)
+            metrics[m] = {**{k: mix[k] for k in ("value", "low", "high", "half_width")}, "readings": each}
+        turns.append({"maneuver": title, "metrics": metrics,
+                      "setup_left_out": sorted({e for g in got.values() for e in g["setup_left_out"]})})
+    return {"readings": list(evs), "turns": turns}
+
+
 def annotate(doctor, mm: list, base, final, mb: dict, mf: dict, level: float = 0.9) -> dict:
     """Fill the intervals of the ``maneuver_metrics`` rows ``mm`` (baseline and final; the
     final's carriers and extrapolation) and return the report's ``prediction_uncertainty``
@@ -214,13 +251,14 @@ def annotate(doctor, mm: list, base, final, mb: dict, mf: dict, level: float = 0
     sec = {"level": level, "method": METHOD, "errors": []}
     parts = (("final", lambda: model_uncertainty(doctor, final, mm, mf, "final", tie, level, sensitivity=True)),
              ("baseline", lambda: model_uncertainty(doctor, base, mm, mb, "baseline", tie, level)),
-             ("predicted_turns", lambda: predicted_turns(doctor, final, tie, level)))
+             ("predicted_turns", lambda: predicted_turns(doctor, final, tie, level)),
+             ("tie", lambda: tie_turns(doctor, tie, level)))
     for key, part in parts:
         try:
             sec[key] = part()
         except Exception as e:  # noqa: BLE001 -- a part that fails is reported, the report is still written
-            sec[key] = [] if key == "predicted_turns" else {"records": {}, "alternatives": [], "excluded": [],
-                                                             "notes": [], "calibration": {}}
+            sec[key] = [] if key == "predicted_turns" else None if key == "tie" else {
+                "records": {}, "alternatives": [], "excluded": [], "notes": [], "calibration": {}}
             sec["errors"].append(f"{key}: could not be computed ({type(e).__name__}: {e})")
     sec["training_envelope"] = pi.state_envelope(doctor.problem.records, doctor.problem.L, doctor.problem.U0)
     sec["summary"] = summary(mm, sec) + sec["errors"]
@@ -258,6 +296,13 @@ def summary(mm: list, sec: dict) -> list:
                    + (f"; carried by {', '.join(share)} (its variance)" if share else "")
                    + (f"; reset to their anchor values {', '.join(reset)} move it beyond its interval" if reset
                       else ""))
+    for t in (sec.get("tie") or {}).get("turns", []):
+        if "metrics" not in t:
+            continue
+        td = t["metrics"]["tactical_diameter_L"]
+        each = "; ".join(f"{e} {x['value']:.3g} L ({x['low']:.3g}-{x['high']:.3g})" for e, x in td["readings"].items())
+        out.append(f"the verdict is a tie, so the {t['maneuver']} is predicted by both readings: {each}; weighted "
+                   f"equally, tactical diameter {td['value']:.3g} L (90 %: {td['low']:.3g}-{td['high']:.3g} L)")
     held = [r for r in mm if np.isfinite(r.get("measured", np.nan)) and np.isfinite(r.get("final_low", np.nan))]
     if held:
         k = sum(r["final_low"] <= r["measured"] <= r["final_high"] for r in held)

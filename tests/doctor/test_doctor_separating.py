@@ -114,3 +114,35 @@ def test_records_with_and_without_a_depth_are_warned_of():
     assert len(notes) == 1 and "water depth given for 1 record(s)" in notes[0]
     assert "validate_0_zigzag_20_10_port" in notes[0] and "train_0_zigzag_10_10" in notes[0]
     assert not Doctor(VESSEL, KNOWN, train, val, Options(candidates=("yaw_bias",))).depth_notes()
+
+
+def test_a_tie_predicts_the_turn_with_both_readings_mixed_not_with_one(tied):
+    """With a tie for a verdict the predicted 35 deg turn is conditioned on neither reading: each predicts it with
+    its own interval (as ``predict_turn`` gives for its fit) and the report's value and interval are their equal
+    mixture, which holds both readings' values."""
+    from study.doctor.predictions import predict_turn
+    from study.doctor.uncertainty import alternative_evaluations, calibration, setting_alternatives, tie_turns
+
+    d, rep = tied
+    got = tie_turns(d, d.opt.tie)
+    assert got["readings"] == ["current", "wind"] and len(got["turns"]) == 2
+    ev = d.result["tie_evaluations"]["wind"]
+    alts = [(label, d.problem, e.fit) for label, e in alternative_evaluations(d, ev, d.opt.tie)[0]]
+    alone = predict_turn(d.problem, ev.fit, draws=64, maneuver="turning_35", alternatives=alts +
+                         setting_alternatives(d, ev.fit, d.opt.tie)[0], cal=calibration(d, ev.fit))
+    td = got["turns"][0]["metrics"]["tactical_diameter_L"]
+    assert td["readings"]["wind"]["value"] == pytest.approx(alone["tactical_diameter_L"], rel=1e-9)
+    values = [x["value"] for x in td["readings"].values()]
+    assert values[0] != pytest.approx(values[1], rel=1e-3)  # the two readings turn differently (see above)
+    assert td["low"] < min(values) <= max(values) < td["high"]
+    assert min(values) < td["value"] < max(values)
+    assert td["low"] >= min(x["low"] for x in td["readings"].values()) - 1e-9
+    assert td["high"] <= max(x["high"] for x in td["readings"].values()) + 1e-9
+    # the page shows both readings and their mixture
+    html = render_html(dict(rep, title="", created_by="", vessel="kvlcc2_l7", model="known", structure="",
+                            worst_windows=[], catalogue=[], figures=[], prediction_uncertainty={"tie": got}))
+    assert "The verdict is a tie: the turns as current and wind predict them" in html
+    from study.doctor.html_format import num
+
+    assert num(td["value"]) in html
+    assert all(f"{e} {num(x['value'])} ({num(x['low'])}-{num(x['high'])})" in html for e, x in td["readings"].items())

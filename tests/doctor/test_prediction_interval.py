@@ -252,3 +252,40 @@ def test_a_prediction_beyond_the_farthest_held_out_record_says_its_growth_is_ass
     far = metric_interval(3.0, [], [], 1.5, g)
     assert near["caveat"] is None
     assert "measured only up to 0.3" in far["caveat"] and far["s_extrap"] == pytest.approx(math.hypot(0.05, 0.15))
+
+
+# ------------------------------------------------------------------------------------------- a tie
+def test_a_tie_mixes_the_readings_and_one_reading_is_its_own_interval():
+    one = pi.tie_mixture([(3.6, 3.6 * math.exp(-Z90 * 0.06), 3.6 * math.exp(Z90 * 0.06))])
+    assert (one["value"], one["low"], one["high"]) == pytest.approx((3.6, 3.6 * math.exp(-Z90 * 0.06),
+                                                                      3.6 * math.exp(Z90 * 0.06)), rel=1e-9)
+    a, b = (3.6, 3.2, 4.05), (3.25, 2.85, 3.7)
+    got = pi.tie_mixture([a, b])
+    # the equal mixture of the two log-normals, sampled
+    rng = np.random.default_rng(0)
+    mus = np.log([a[0], b[0]])
+    sds = np.array([np.log(a[2] / a[1]), np.log(b[2] / b[1])]) / (2 * Z90)
+    pick = rng.integers(0, 2, 400_000)
+    x = np.exp(rng.normal(mus[pick], sds[pick]))
+    assert (got["low"], got["value"], got["high"]) == pytest.approx(tuple(np.quantile(x, [0.05, 0.5, 0.95])),
+                                                                     rel=5e-3)
+    assert got["low"] < b[0] < got["value"] < a[0] < got["high"]  # each reading's value inside, neither chosen
+    assert got["high"] - got["low"] > max(a[2] - a[1], b[2] - b[1])  # wider than either reading alone
+
+
+def test_a_tie_with_a_reading_that_has_no_interval_has_none():
+    got = pi.tie_mixture([(3.6, 3.2, 4.0), (3.3, math.nan, math.nan)])
+    assert math.isnan(got["low"]) and math.isnan(got["value"])
+
+
+def test_the_turn_predictions_tie_is_the_committed_doctor_verdict():
+    """The KVLCC2 turn table mixes the readings the doctor's committed report on the same records calls a tie."""
+    import json
+    from pathlib import Path
+
+    from study.doctor.turn_prediction import CASES, TIE
+
+    report = Path(__file__).resolve().parents[2] / "paper_figs/doctor/kvlcc2_hsva_identified/report.json"
+    tied = json.loads(report.read_text())["ambiguous"]
+    effects = {label: effs for label, _, effs in CASES}
+    assert sorted(e for label in TIE for e in effects[label]) == sorted(tied)

@@ -38,6 +38,12 @@ from . import prediction_interval as pi
 #: the metric whose error stands in for a metric no held-out record carries: the RMS yaw rate, which a turning
 #: circle's size scales with (a steady turn's diameter is 2 U / r)
 SURROGATE = "rms_yaw_rate"
+#: a metric whose size is set by how soon the ship starts turning rather than by the yaw rate it settles at: its
+#: stand-in is the zigzags' initial turning time (rudder execution to the switch heading), which measures the same
+#: onset. A turn's advance (the distance run until the heading has changed by 90 deg) is mostly that onset at speed
+#: (assumption, labelled); the RMS yaw rate, the steady part, does not see an onset that comes late
+ONSET_SURROGATE = "initial_turning_time"
+SURROGATES = {"advance_L": ONSET_SURROGATE, "advance": ONSET_SURROGATE}
 #: a record that starts slower than this share of U0 is replayed from where it first reaches it
 START_SPEED_U0 = 0.5
 #: held-out records that reach less than this share of the farthest record's reach do not calibrate (see
@@ -72,6 +78,9 @@ def posterior_draws(problem, fit, draws: int, seed: int = 0) -> tuple:
     if post is None:
         return None, []
     w, V = np.linalg.eigh(post["cov"])
+    # an eigenvector's sign is arbitrary (LAPACK's kernels may choose differently on another CPU): each is turned
+    # so that its largest component is positive, so that a seed gives the same draws on every machine
+    V = V * np.sign(V[np.argmax(np.abs(V), axis=0), np.arange(V.shape[1])])
     z = np.random.default_rng(seed).standard_normal((draws, len(w)))
     thetas = post["mean"] + (z * np.sqrt(np.clip(w, 0.0, None))) @ V.T
     return post, [dict(zip(post["names"], th)) for th in thetas]
@@ -356,8 +365,9 @@ def growth_for(cal: dict, metric: str) -> dict:
     at least ``MIN_REACH`` of the farthest record's reach (assumption: a much smaller manoeuvre's
     relative errors are dominated by what a large one hardly feels -- a rudder offset, an asymmetry,
     the noise -- and say nothing about a prediction at the envelope's edge or beyond): the metric's
-    own errors where two or more such records carry it, else those of the surrogate (the RMS yaw
-    rate) -- ``source`` says which. A held-out replay that diverged counts as an error of log 2 at
+    own errors where two or more such records carry it, else those of its stand-in where two or
+    more carry that (:data:`SURROGATES`: the initial turning time for a turn's advance), else those
+    of the surrogate (the RMS yaw rate) -- ``source`` says which. A held-out replay that diverged counts as an error of log 2 at
     the farthest distance seen, so that divergence is not left out (assumption).
 
     Each pair's own identification spread (``own_sd``, :func:`own_spread`: the split's posterior
@@ -367,8 +377,12 @@ def growth_for(cal: dict, metric: str) -> dict:
     keeps its whole error (the conservative side), and so does a divergence. ``net_of_own``
     counts the pairs whose spread was taken out."""
     big = [p for p in cal["pairs"] if p.get("reach", 1.0) >= MIN_REACH]
-    own = [p for p in big if metric in p["errors"]]
-    use, source = (own, metric) if len(own) >= 2 else ([p for p in big if SURROGATE in p["errors"]], SURROGATE)
+    use, source = [], SURROGATE
+    for m in (metric, SURROGATES.get(metric), SURROGATE):  # its own errors, its stand-in's, the RMS yaw rate's
+        carried = [p for p in big if m in p["errors"]]
+        if m is not None and (len(carried) >= 2 or m == SURROGATE):
+            use, source = carried, m
+            break
     dmax = max([p["distance"] for p in cal["pairs"] if math.isfinite(p["distance"])] or [0.0])
     div = [p for p in big if p.get("diverged")]
     d = [p["distance"] for p in use] + [dmax] * len(div)

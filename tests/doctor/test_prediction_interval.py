@@ -223,6 +223,21 @@ def test_growth_for_a_metric_no_record_carries_falls_back_to_the_yaw_rate_and_co
     assert me.growth_for(cal, "first_overshoot")["source"] == "rms_yaw_rate"  # one pair is not two
 
 
+def test_a_turns_advance_is_calibrated_on_the_zigzags_onset_not_on_the_yaw_rate_it_settles_at():
+    """The advance is set by how soon the ship starts turning: its stand-in is the initial turning time (two pairs
+    or more carry it), else the RMS yaw rate; the tactical diameter keeps the RMS yaw rate."""
+    cal = {"pairs": [{"distance": 0.0, "errors": {"rms_yaw_rate": 0.02, "initial_turning_time": 0.2}},
+                     {"distance": 0.0, "errors": {"rms_yaw_rate": 0.04, "initial_turning_time": 0.3}},
+                     {"distance": 0.0, "errors": {"rms_yaw_rate": 0.03}}]}
+    adv, td = me.growth_for(cal, "advance_L"), me.growth_for(cal, "tactical_diameter_L")
+    assert adv["source"] == "initial_turning_time" and adv["n"] == 2
+    assert adv["sigma0"] == pytest.approx(math.sqrt((0.2 ** 2 + 0.3 ** 2) / 2))
+    assert me.growth_for(cal, "advance")["source"] == "initial_turning_time"  # the advance in metres too
+    assert td["source"] == "rms_yaw_rate" and td["n"] == 3
+    del cal["pairs"][1]["errors"]["initial_turning_time"]  # one pair is not two: the RMS yaw rate stands in
+    assert me.growth_for(cal, "advance_L")["source"] == "rms_yaw_rate"
+
+
 def test_a_records_end_with_the_propeller_stopped_is_no_part_of_its_envelope():
     f = frame(np.r_[np.full(100, 0.1), np.full(20, 0.9)], 0.2)
     f["n"] = np.r_[np.full(100, 10.0), np.zeros(20)]
@@ -289,3 +304,19 @@ def test_the_turn_predictions_tie_is_the_committed_doctor_verdict():
     tied = json.loads(report.read_text())["ambiguous"]
     effects = {label: effs for label, _, effs in CASES}
     assert sorted(e for label in TIE for e in effects[label]) == sorted(tied)
+
+
+def test_posterior_draws_do_not_depend_on_the_signs_lapack_gives_the_eigenvectors(monkeypatch):
+    """A seed gives the same draws whichever sign each eigenvector of the covariance comes out with (LAPACK's
+    kernels may choose differently on another CPU)."""
+    rng = np.random.default_rng(4)
+    A = rng.standard_normal((5, 8))
+    post = {"cov": A @ A.T, "mean": np.arange(5.0), "names": list("abcde")}
+    problem = type("P", (), {"posterior": lambda self, fit: post})()
+    _, one = me.posterior_draws(problem, None, 6, seed=3)
+    eigh = np.linalg.eigh
+    monkeypatch.setattr(np.linalg, "eigh", lambda c: (lambda w, V: (w, V * np.array([1, -1, 1, -1, -1])))(*eigh(c)))
+    _, flipped = me.posterior_draws(problem, None, 6, seed=3)
+    assert all(a == pytest.approx(b, abs=1e-12) for x, y in zip(one, flipped) for a, b in zip(x.values(), y.values()))
+    sample = np.array([list(d.values()) for d in me.posterior_draws(problem, None, 20000, seed=0)[1]])
+    assert np.cov(sample.T) == pytest.approx(post["cov"], abs=0.1 * np.abs(post["cov"]).max())

@@ -41,7 +41,8 @@ SURROGATE = "rms_yaw_rate"
 #: a metric whose size is set by how soon the ship starts turning rather than by the yaw rate it settles at: its
 #: stand-in is the zigzags' initial turning time (rudder execution to the switch heading), which measures the same
 #: onset. A turn's advance (the distance run until the heading has changed by 90 deg) is mostly that onset at speed
-#: (assumption, labelled); the RMS yaw rate, the steady part, does not see an onset that comes late
+#: (assumption, labelled); the RMS yaw rate, the steady part, does not see an onset that comes late. The advance
+#: depends on the rate the turn settles at too, so the larger of the two errors counts (``growth_for``)
 ONSET_SURROGATE = "initial_turning_time"
 SURROGATES = {"advance_L": ONSET_SURROGATE, "advance": ONSET_SURROGATE}
 #: a record that starts slower than this share of U0 is replayed from where it first reaches it
@@ -365,9 +366,10 @@ def growth_for(cal: dict, metric: str) -> dict:
     at least ``MIN_REACH`` of the farthest record's reach (assumption: a much smaller manoeuvre's
     relative errors are dominated by what a large one hardly feels -- a rudder offset, an asymmetry,
     the noise -- and say nothing about a prediction at the envelope's edge or beyond): the metric's
-    own errors where two or more such records carry it, else those of its stand-in where two or
-    more carry that (:data:`SURROGATES`: the initial turning time for a turn's advance), else those
-    of the surrogate (the RMS yaw rate) -- ``source`` says which. A held-out replay that diverged counts as an error of log 2 at
+    own errors where two or more such records carry it, else those of the surrogate (the RMS yaw
+    rate) or, for a metric with a stand-in of its own (:data:`SURROGATES`: the initial turning time
+    for a turn's advance) that two or more records carry, whichever of the two gives the larger
+    error at the farthest held-out distance -- ``source`` says which. A held-out replay that diverged counts as an error of log 2 at
     the farthest distance seen, so that divergence is not left out (assumption).
 
     Each pair's own identification spread (``own_sd``, :func:`own_spread`: the split's posterior
@@ -377,12 +379,24 @@ def growth_for(cal: dict, metric: str) -> dict:
     keeps its whole error (the conservative side), and so does a divergence. ``net_of_own``
     counts the pairs whose spread was taken out."""
     big = [p for p in cal["pairs"] if p.get("reach", 1.0) >= MIN_REACH]
-    use, source = [], SURROGATE
-    for m in (metric, SURROGATES.get(metric), SURROGATE):  # its own errors, its stand-in's, the RMS yaw rate's
-        carried = [p for p in big if m in p["errors"]]
-        if m is not None and (len(carried) >= 2 or m == SURROGATE):
-            use, source = carried, m
-            break
+    if len([p for p in big if metric in p["errors"]]) >= 2:
+        return _growth(cal, big, metric)
+    # a metric no two held-out records carry: the RMS yaw rate stands in, and where the metric has a stand-in of
+    # its own (the advance: the onset) that two records carry, the larger error of the two at the farthest held-out
+    # distance (the advance depends on both how soon the turn starts and the rate it settles at: assumption)
+    out = _growth(cal, big, SURROGATE)
+    other = SURROGATES.get(metric)
+    if other is not None and len([p for p in big if other in p["errors"]]) >= 2:
+        alt = _growth(cal, big, other)
+        d = max(out["d_max"], alt["d_max"]) if math.isfinite(out["d_max"]) else alt["d_max"]
+        if pi.extrapolation_log_sd(d, alt) > pi.extrapolation_log_sd(d, out) or not math.isfinite(out["sigma0"]):
+            out = alt
+    return out
+
+
+def _growth(cal: dict, big: list, source: str) -> dict:
+    """The growth fitted on the held-out pairs of ``big`` that carry ``source`` (and the divergences)."""
+    use = [p for p in big if source in p["errors"]]
     dmax = max([p["distance"] for p in cal["pairs"] if math.isfinite(p["distance"])] or [0.0])
     div = [p for p in big if p.get("diverged")]
     d = [p["distance"] for p in use] + [dmax] * len(div)

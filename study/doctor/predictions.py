@@ -47,8 +47,8 @@ METHOD = (
     "identification spread (its fit's posterior draws replayed through it) taken out in quadrature, s0 the floor "
     "and k its growth with d, the distance outside the training envelope (the largest relative excess of |v'|, "
     "|r'|, the drift angle and the rudder angle over the records' 99th percentiles). The metric's own held-out "
-    "errors when two or more training records carry it, else those of its stand-in (a turn's advance: the "
-    "zigzags' initial turning time, the onset of the turn), else those of the RMS yaw rate at speed. Not covered: "
+    "errors when two or more training records carry it, else those of the RMS yaw rate at speed (for a turn's "
+    "advance, those of the zigzags' initial turning time, the turn's onset, where they are the larger). Not covered: "
     "errors the training records share with the prediction (a sensor bias, the facility), a growth steeper than "
     "linear beyond the farthest held-out record, and conditions no record has (another depth, speed or loading).")
 

@@ -223,9 +223,10 @@ def test_growth_for_a_metric_no_record_carries_falls_back_to_the_yaw_rate_and_co
     assert me.growth_for(cal, "first_overshoot")["source"] == "rms_yaw_rate"  # one pair is not two
 
 
-def test_a_turns_advance_is_calibrated_on_the_zigzags_onset_not_on_the_yaw_rate_it_settles_at():
-    """The advance is set by how soon the ship starts turning: its stand-in is the initial turning time (two pairs
-    or more carry it), else the RMS yaw rate; the tactical diameter keeps the RMS yaw rate."""
+def test_a_turns_advance_is_calibrated_on_the_zigzags_onset_as_well_as_on_the_yaw_rate_it_settles_at():
+    """The advance depends on how soon the ship starts turning and on the rate it settles at: the larger of the
+    errors of the initial turning time (two pairs or more carry it) and the RMS yaw rate counts; the tactical
+    diameter keeps the RMS yaw rate."""
     cal = {"pairs": [{"distance": 0.0, "errors": {"rms_yaw_rate": 0.02, "initial_turning_time": 0.2}},
                      {"distance": 0.0, "errors": {"rms_yaw_rate": 0.04, "initial_turning_time": 0.3}},
                      {"distance": 0.0, "errors": {"rms_yaw_rate": 0.03}}]}
@@ -234,6 +235,11 @@ def test_a_turns_advance_is_calibrated_on_the_zigzags_onset_not_on_the_yaw_rate_
     assert adv["sigma0"] == pytest.approx(math.sqrt((0.2 ** 2 + 0.3 ** 2) / 2))
     assert me.growth_for(cal, "advance")["source"] == "initial_turning_time"  # the advance in metres too
     assert td["source"] == "rms_yaw_rate" and td["n"] == 3
+    for p in cal["pairs"]:  # the rate the turn settles at is worse predicted than its onset: it counts
+        p["errors"]["rms_yaw_rate"] = 0.5
+    assert me.growth_for(cal, "advance_L")["source"] == "rms_yaw_rate"
+    for p in cal["pairs"]:
+        p["errors"]["rms_yaw_rate"] = 0.03
     del cal["pairs"][1]["errors"]["initial_turning_time"]  # one pair is not two: the RMS yaw rate stands in
     assert me.growth_for(cal, "advance_L")["source"] == "rms_yaw_rate"
 

@@ -38,11 +38,10 @@ from . import prediction_interval as pi
 #: the metric whose error stands in for a metric no held-out record carries: the RMS yaw rate, which a turning
 #: circle's size scales with (a steady turn's diameter is 2 U / r)
 SURROGATE = "rms_yaw_rate"
-#: a metric whose size is set by how soon the ship starts turning rather than by the yaw rate it settles at: its
-#: stand-in is the zigzags' initial turning time (rudder execution to the switch heading), which measures the same
-#: onset. A turn's advance (the distance run until the heading has changed by 90 deg) is mostly that onset at speed
-#: (assumption, labelled); the RMS yaw rate, the steady part, does not see an onset that comes late. The advance
-#: depends on the rate the turn settles at too, so the larger of the two errors counts (``growth_for``)
+#: a turn's advance (the distance run until the heading has changed by 90 deg) depends on how soon the ship starts
+#: turning as well as on the yaw rate it settles at, and the RMS yaw rate does not see an onset that comes late: the
+#: onset's stand-in is the zigzags' initial turning time (rudder execution to the switch heading), and the larger
+#: of the two errors counts (``growth_for``; assumption, labelled)
 ONSET_SURROGATE = "initial_turning_time"
 SURROGATES = {"advance_L": ONSET_SURROGATE, "advance": ONSET_SURROGATE}
 #: a record that starts slower than this share of U0 is replayed from where it first reaches it
@@ -369,8 +368,9 @@ def growth_for(cal: dict, metric: str) -> dict:
     own errors where two or more such records carry it, else those of the surrogate (the RMS yaw
     rate) or, for a metric with a stand-in of its own (:data:`SURROGATES`: the initial turning time
     for a turn's advance) that two or more records carry, whichever of the two gives the larger
-    error at the farthest held-out distance -- ``source`` says which. A held-out replay that diverged counts as an error of log 2 at
-    the farthest distance seen, so that divergence is not left out (assumption).
+    error at the farthest held-out distance -- ``source`` says which. A held-out replay that
+    diverged counts as an error of log 2 at the farthest distance seen, so that divergence is not
+    left out (assumption).
 
     Each pair's own identification spread (``own_sd``, :func:`own_spread`: the split's posterior
     draws replayed through the held-out record) is taken out of its squared error

@@ -182,6 +182,8 @@ def tie_mixture(readings, level: float = 0.9) -> dict:
     the value. Choosing one reading would give an interval that holds only its own world; the
     mixture holds each in proportion. Returns ``{'value', 'low', 'high', 'half_width', 'n'}``
     (half_width: (high - low) / (2 value)); NaNs when a reading has no interval."""
+    if len(readings) == 0:
+        raise ValueError("tie_mixture: no reading given")
     z = z_of(level)
     mus, sds = [], []
     for value, low, high in readings:
@@ -192,8 +194,6 @@ def tie_mixture(readings, level: float = 0.9) -> dict:
         mus.append(math.log(vals[0]))
         sds.append(max((math.log(vals[2]) - math.log(vals[1])) / (2.0 * z), 1e-12))
     mus, sds = np.array(mus), np.array(sds)
-    if len(mus) == 0:
-        raise ValueError("tie_mixture: no reading given")
 
     def quantile(p: float) -> float:
         lo, hi = float(np.min(mus - 10 * sds)), float(np.max(mus + 10 * sds))

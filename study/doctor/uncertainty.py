@@ -210,34 +210,27 @@ def predicted_turns(doctor, ev, tie: float, level: float = 0.9) -> list:
 
 def tie_turns(doctor, tie: float, level: float = 0.9) -> dict | None:
     """When the verdict is a tie, the 35 deg turns as each tied reading predicts them (its
-    equation-error fit, set-up effects left out as for the final model's turns) and their equal
-    mixture (``prediction_interval.tie_mixture``): the records favour neither reading, so the
-    turn is not conditioned on one. None without a tie. Returns ``{'readings', 'turns': [{'maneuver',
+    equation-error fit, through :func:`predicted_turns`) and their equal mixture
+    (``prediction_interval.tie_mixture``): the records favour neither reading, so the turn is not
+    conditioned on one. None without a tie. Returns ``{'readings', 'turns': [{'maneuver',
     'metrics': {metric: {'value', 'low', 'high', 'half_width', 'readings': {effect: {'value',
-    'low', 'high'}}}}}]}``."""
-    from .predictions import TURN_METRICS, predict_turn
-
+    'low', 'high'}}}}, 'setup_left_out'}]}`` (a turn no reading could predict: ``{'maneuver', 'why'}``)."""
     evs = doctor.result.get("tie_evaluations") or {}
     if len(evs) < 2:
         return None
+    each = {effect: predicted_turns(doctor, ev, tie, level) for effect, ev in evs.items()}
     turns = []
-    for title, man in TURNS:
-        got = {}
-        try:
-            for effect, ev in evs.items():
-                others = [(label, doctor.problem, e.fit) for label, e in alternative_evaluations(doctor, ev, tie)[0]]
-                settings, _ = setting_alternatives(doctor, ev.fit, tie)
-                got[effect] = predict_turn(doctor.problem, ev.fit, draws=2 * DRAWS, maneuver=man, level=level,
-                                           keep_setup_effects=doctor.opt.keep_setup_effects,
-                                           alternatives=others + settings, tie=tie, cal=calibration(doctor, ev.fit))
-        except ValueError as e:  # a kind without a propeller to solve for, ...: as predicted_turns says it
-            turns.append({"maneuver": title, "why": str(e)})
+    for k, (title, _) in enumerate(TURNS):
+        got = {effect: sides[k] for effect, sides in each.items()}
+        why = next((g["why"] for g in got.values() if "metrics" not in g), None)
+        if why is not None:  # a kind without a propeller to solve for, ...: as predicted_turns says it
+            turns.append({"maneuver": title, "why": why})
             continue
         metrics = {}
-        for m in TURN_METRICS:
-            each = {e: {k: g["metrics"][m][k] for k in ("value", "low", "high")} for e, g in got.items()}
-            mix = pi.tie_mixture([(x["value"], x["low"], x["high"]) for x in each.values()], level)
-            metrics[m] = {**{k: mix[k] for k in ("value", "low", "high", "half_width")}, "readings": each}
+        for m in got[next(iter(got))]["metrics"]:
+            readings = {e: {x: g["metrics"][m][x] for x in ("value", "low", "high")} for e, g in got.items()}
+            mix = pi.tie_mixture([(r["value"], r["low"], r["high"]) for r in readings.values()], level)
+            metrics[m] = {**{x: mix[x] for x in ("value", "low", "high", "half_width")}, "readings": readings}
         turns.append({"maneuver": title, "metrics": metrics,
                       "setup_left_out": sorted({e for g in got.values() for e in g["setup_left_out"]})})
     return {"readings": list(evs), "turns": turns}

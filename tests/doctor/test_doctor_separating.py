@@ -8,6 +8,7 @@ import pytest
 
 from study.doctor.diagnose import Doctor, Options
 from study.doctor.html import render_html
+from study.doctor.html_format import num
 from study.doctor.separating import MENU, SEPARATES, SPEEDS_U0, channel_noise, separation
 
 from test_doctor import KNOWN, VESSEL, records, scaled
@@ -131,7 +132,9 @@ def test_a_tie_predicts_the_turn_with_both_readings_mixed_not_with_one(tied):
     alone = predict_turn(d.problem, ev.fit, draws=64, maneuver="turning_35", alternatives=alts +
                          setting_alternatives(d, ev.fit, d.opt.tie)[0], cal=calibration(d, ev.fit))
     td = got["turns"][0]["metrics"]["tactical_diameter_L"]
-    assert td["readings"]["wind"]["value"] == pytest.approx(alone["tactical_diameter_L"], rel=1e-9)
+    own = alone["metrics"]["tactical_diameter_L"]
+    assert [td["readings"]["wind"][k] for k in ("value", "low", "high")] == pytest.approx(
+        [own["value"], own["low"], own["high"]], rel=1e-9)
     values = [x["value"] for x in td["readings"].values()]
     assert values[0] != pytest.approx(values[1], rel=1e-3)  # the two readings turn differently (see above)
     assert td["low"] < min(values) <= max(values) < td["high"]
@@ -142,7 +145,5 @@ def test_a_tie_predicts_the_turn_with_both_readings_mixed_not_with_one(tied):
     html = render_html(dict(rep, title="", created_by="", vessel="kvlcc2_l7", model="known", structure="",
                             worst_windows=[], catalogue=[], figures=[], prediction_uncertainty={"tie": got}))
     assert "The verdict is a tie: the turns as current and wind predict them" in html
-    from study.doctor.html_format import num
-
     assert num(td["value"]) in html
     assert all(f"{e} {num(x['value'])} ({num(x['low'])}-{num(x['high'])})" in html for e, x in td["readings"].items())

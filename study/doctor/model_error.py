@@ -71,10 +71,16 @@ def model_cfg_of(problem) -> dict:
 
 
 def posterior_draws(problem, fit, draws: int, seed: int = 0) -> tuple:
-    """(posterior, list of coefficient dicts): ``draws`` draws from the fit's Gaussian posterior
-    (the covariance made positive semidefinite by clipping its eigenvalues); (None, []) when
-    nothing is free."""
-    post = problem.posterior(fit) if draws else None
+    """(posterior, list of parameter dicts): ``draws`` draws from the fit's Gaussian posterior,
+    its linear unknowns together with its effects' nonlinear parameters
+    (``EffectsProblem.posterior(fit, nonlinear=True)``, computed once per fit; the covariance made
+    positive semidefinite by clipping its eigenvalues); (None, []) when nothing is free."""
+    if not draws:
+        return None, []
+    cache = problem.__dict__.setdefault("_joint_posteriors", {})
+    if id(fit) not in cache or cache[id(fit)][0] is not fit:
+        cache[id(fit)] = (fit, problem.posterior(fit, nonlinear=True))
+    post = cache[id(fit)][1]
     if post is None:
         return None, []
     w, V = np.linalg.eigh(post["cov"])
@@ -87,10 +93,12 @@ def posterior_draws(problem, fit, draws: int, seed: int = 0) -> tuple:
 
 
 def params_of(problem, fit, coefs: dict, info=None, replay: bool = True) -> np.ndarray:
-    """The packed vessel parameters of ``fit`` with its coefficients replaced by ``coefs`` (those
-    the fit lacks -- a set-up effect left out -- are dropped)."""
+    """The packed vessel parameters of ``fit`` with its coefficients and nonlinear parameters
+    replaced by those in ``coefs`` (those the fit lacks -- a set-up effect left out -- are
+    dropped)."""
     c = {k: float(v) for k, v in coefs.items() if k in fit.coefs}
-    return problem.vessel(fit.effects, {**fit.outer, **c}, info, coefs={**fit.coefs, **c}, replay=replay).params
+    o = {k: float(v) for k, v in coefs.items() if k in fit.outer}
+    return problem.vessel(fit.effects, {**fit.outer, **o, **c}, info, coefs={**fit.coefs, **c}, replay=replay).params
 
 
 def replay_members(problem, fit, df: pd.DataFrame, info, coef_sets: list) -> list:
@@ -112,7 +120,7 @@ def replay_members(problem, fit, df: pd.DataFrame, info, coef_sets: list) -> lis
     data = {c: np.interp(tu, t, a) for c, a in seg[0].data.items()}
     v = problem.vessel(fit.effects, fit.values, info, coefs=fit.coefs)
     x0 = {c: initial_value(tu, data[c]) for c in ("u", "v", "r", "x0", "y0", "psi")}
-    for e in fit.effects:
+    for e in fit.effects:  # one initial state for the batch: the fit's own (a current's draw moves it by its spread)
         problem.effect(e).initial_state(problem, fit.values, x0)
     state0 = [x0["u"], x0["v"], x0["r"], x0["x0"], x0["y0"], x0["psi"]]
     P = np.column_stack([params_of(problem, fit, c, info) for c in coef_sets])

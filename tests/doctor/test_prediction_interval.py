@@ -318,7 +318,7 @@ def test_posterior_draws_do_not_depend_on_the_signs_lapack_gives_the_eigenvector
     rng = np.random.default_rng(4)
     A = rng.standard_normal((5, 8))
     post = {"cov": A @ A.T, "mean": np.arange(5.0), "names": list("abcde")}
-    problem = type("P", (), {"posterior": lambda self, fit: post})()
+    problem = type("P", (), {"posterior": lambda self, fit, nonlinear=False: post})()
     _, one = me.posterior_draws(problem, None, 6, seed=3)
     eigh = np.linalg.eigh
     monkeypatch.setattr(np.linalg, "eigh", lambda c: (lambda w, V: (w, V * np.array([1, -1, 1, -1, -1])))(*eigh(c)))

@@ -381,9 +381,11 @@ class EffectsProblem:
         J = float(np.mean([rss[eq] / ref[k] for k, eq in enumerate(EQUATIONS)])) + penalty
         return coefs, J, rss
 
-    def posterior(self, fit: Fit) -> dict | None:
-        """The Gaussian posterior of a fit's linear unknowns (:func:`uncertainty.posterior`)."""
-        return uncertainty.posterior(self, fit)
+    def posterior(self, fit: Fit, nonlinear: bool = False) -> dict | None:
+        """The Gaussian posterior of a fit's linear unknowns (:func:`uncertainty.posterior`), with
+        ``nonlinear`` together with the effects' nonlinear parameters
+        (:func:`uncertainty.joint_posterior`)."""
+        return uncertainty.joint_posterior(self, fit) if nonlinear else uncertainty.posterior(self, fit)
 
     def identifiability(self, fit: Fit) -> list[dict]:
         """Per anchored model coefficient, how far the records determine it

@@ -5,6 +5,8 @@ coefficient (the identifiability table of the doctor's report). Functions of an
 ``solve``, ``posterior`` and ``identifiability``."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .search import Fit
@@ -81,6 +83,109 @@ def posterior(pb, fit: Fit) -> dict | None:
     cov = np.linalg.pinv(A / np.outer(s, s), hermitian=True) / np.outer(s, s)
     mean = np.array([float(fit.coefs.get(n, 0.0)) for n in names])
     return {"names": list(names), "mean": mean, "cov": cov, "tau": tau, "prior": prior}
+
+#: a nonlinear parameter within this share of its box from a bound is on it (not identified: no curvature there)
+ON_BOUND = 1e-3
+#: the first difference that finds a nonlinear parameter's scale, as a share of its box; the curvature is then measured
+#: over +-1 of its posterior sd (assumption: the profile error is close to quadratic over that range)
+FIRST_STEP = 1e-3
+
+
+def _profile(pb, fit: Fit, outer: dict) -> tuple:
+    """(training error, linear unknowns) with the nonlinear parameters at ``outer`` and the linear
+    unknowns solved there (variable projection's profile)."""
+    coefs, J, _ = pb.solve(fit.effects, {**fit.outer, **outer})
+    return J, coefs
+
+
+def _outer_free(pb, fit: Fit) -> list:
+    """(name, estimate, lo, hi) of the fit's continuous nonlinear parameters strictly inside their
+    box."""
+    out = []
+    for name, lo, hi, *_ in pb.outer_params(fit.effects):
+        x = fit.outer.get(name)
+        if not isinstance(x, (int, float)) or not (np.isfinite(lo) and np.isfinite(hi) and hi > lo):
+            continue
+        tol = ON_BOUND * (hi - lo)
+        if lo + tol < x < hi - tol:
+            out.append((name, float(x), float(lo), float(hi)))
+    return out
+
+
+def joint_posterior(pb, fit: Fit) -> dict | None:
+    """The Gaussian (Laplace) posterior of a fit's linear unknowns together with its effects'
+    continuous nonlinear parameters (a current's components, a wind's, a depth, a rudder's lag):
+    ``posterior``'s keys plus ``outer`` (the nonlinear parameters' names, last in ``names``).
+
+    The nonlinear parameters' covariance is that of the profile training error (the linear
+    unknowns solved at each point, as the search does): its Hessian H by central differences
+    over +-1 sd of each parameter, Sigma = (2 tau / 3) H^-1 on the same data weight as the linear
+    posterior (-2 log p = 3 J / tau); a direction the error does not curve in gets the variance
+    of a uniform draw over the box (it is not determined). The linear unknowns follow the
+    nonlinear parameters along their conditional mean c*(o) (slope B by the same differences) and
+    keep their conditional covariance: cov(c) = Sigma_c + B Sigma_o B^T. Parameters on a bound of
+    their box and discrete variants are held at their estimates. None when nothing is free."""
+    lin = posterior(pb, fit)
+    free = _outer_free(pb, fit)
+    if not free:
+        return None if lin is None else {**lin, "outer": []}
+    if pb.tau is None:
+        pb.tau = noise_per_row(pb)
+    y, _, _ = pb.rows(fit.effects, fit.outer, model=True)
+    tau = pb.tau * pb.m_base / len(y)
+    names_o = [f[0] for f in free]
+    x0 = np.array([f[1] for f in free])
+    box = np.array([f[3] - f[2] for f in free])
+    room = np.array([min(f[1] - f[2], f[3] - f[1]) for f in free])
+    lin_names = lin["names"] if lin is not None else []
+
+    def at(dx):
+        J, c = _profile(pb, fit, dict(zip(names_o, x0 + dx)))
+        return J, np.array([c.get(n, 0.0) for n in lin_names])
+
+    J0, _ = at(np.zeros(len(free)))
+    d = len(free)
+
+    def diag(h):
+        Hd, B = np.zeros(d), np.zeros((len(lin_names), d))
+        for i in range(d):
+            e = np.zeros(d)
+            e[i] = h[i]
+            (jp, cp), (jm, cm) = at(e), at(-e)
+            Hd[i] = (jp + jm - 2.0 * J0) / h[i] ** 2
+            B[:, i] = (cp - cm) / (2.0 * h[i])
+        return Hd, B
+
+    h = np.minimum(FIRST_STEP * box, 0.9 * room)
+    Hd, _ = diag(h)
+    sd = np.where(Hd > 0, np.sqrt(2.0 * tau / (3.0 * np.where(Hd > 0, Hd, 1.0))), box / math.sqrt(12.0))
+    h = np.clip(sd, 1e-6 * box, np.minimum(0.25 * box, 0.9 * room))
+    Hd, B = diag(h)
+    H = np.diag(Hd)
+    for i in range(d):
+        for j in range(i + 1, d):
+            ei, ej = np.zeros(d), np.zeros(d)
+            ei[i], ej[j] = h[i], h[j]
+            f = [at(ei + ej)[0], at(ei - ej)[0], at(-ei + ej)[0], at(-ei - ej)[0]]
+            H[i, j] = H[j, i] = (f[0] - f[1] - f[2] + f[3]) / (4.0 * h[i] * h[j])
+    # in box units, each direction's precision floored at a uniform draw's over the box (variance 1/12)
+    Hs = (3.0 / (2.0 * tau)) * H * np.outer(box, box)
+    w, V = np.linalg.eigh(0.5 * (Hs + Hs.T))
+    cov_o = (V / np.maximum(w, 12.0)) @ V.T * np.outer(box, box)
+    mean = np.concatenate([lin["mean"], x0]) if lin is not None else x0
+    if lin is not None:
+        k = len(lin_names)
+        cov = np.zeros((k + d, k + d))
+        cov[:k, :k] = lin["cov"] + B @ cov_o @ B.T
+        cov[:k, k:] = B @ cov_o
+        cov[k:, :k] = cov[:k, k:].T
+        cov[k:, k:] = cov_o
+        prior = None if lin["prior"] is None else tuple(np.concatenate([a, np.zeros(d)]) for a in lin["prior"])
+    else:
+        cov, prior = cov_o, None
+    return {"names": list(lin_names) + names_o, "mean": mean, "cov": cov, "tau": tau, "prior": prior,
+            "outer": names_o}
+
 
 def identifiability(pb, fit: Fit) -> list[dict]:
     """Per anchored model coefficient of a fit: prior, estimate, posterior and prior standard

@@ -29,6 +29,8 @@ import json
 import tempfile
 from pathlib import Path
 
+from .measurement_noise import agrees
+
 REPO = Path(__file__).resolve().parents[2]
 #: the committed examples (rebuilt only when asked: --out paper_figs/doctor)
 COMMITTED = REPO / "paper_figs" / "doctor"
@@ -103,19 +105,23 @@ def _turns(rep: dict) -> list:
     ok = lambda x: x is not None and x == x and abs(x) != float("inf")  # noqa: E731
     out = []
     if rows:
-        out = ["", "| turning circle | measured TD [L] | baseline | final | final, 90 % |", "|---|---|---|---|---|"]
+        out = ["", "| turning circle | measured TD [L] | its noise, 90 % | baseline | final | final, 90 % |",
+               "|---|---|---|---|---|---|"]
         errs = {"baseline": [], "final": []}
-        held, widths = 0, []
+        held, agree, widths = 0, 0, []
         for m in rows:
             cells = [f"{m[k]:.2f}" if ok(m[k]) else "-" for k in ("measured", "baseline", "final")]
             lo, hi = m.get("final_low"), m.get("final_high")
             iv = f"{lo:.2f}-{hi:.2f}" if ok(lo) and ok(hi) else "-"
-            out.append(f"| {m['record']} | " + " | ".join(cells) + f" | {iv} |")
+            mlo, mhi = m.get("measured_low"), m.get("measured_high")
+            noise = f"{mlo:.2f}-{mhi:.2f}" if ok(mlo) and ok(mhi) else "-"
+            out.append(f"| {m['record']} | {cells[0]} | {noise} | " + " | ".join(cells[1:]) + f" | {iv} |")
             if ok(m["measured"]) and ok(m["baseline"]) and ok(m["final"]):
                 for k in errs:
                     errs[k].append(abs(m[k] / m["measured"] - 1))
             if ok(lo) and ok(hi) and ok(m["measured"]):
                 held += lo <= m["measured"] <= hi
+                agree += bool(agrees(m))
                 widths.append(m["final_uncertainty"]["half_width"])
         if errs["baseline"]:
             n = len(errs["baseline"])
@@ -125,7 +131,8 @@ def _turns(rep: dict) -> list:
             widths.sort()
             med = (widths[(len(widths) - 1) // 2] + widths[len(widths) // 2]) / 2
             out.append(f"The final model's 90 % intervals hold {held} of {len(widths)} measured tactical diameters; "
-                       f"median half-width {100 * med:.0f} %.")
+                       f"median half-width {100 * med:.0f} %. With the measured values' own noise (each record's, "
+                       f"replayed) prediction and measurement agree on {agree} of {len(widths)}.")
     for t in (rep.get("prediction_uncertainty") or {}).get("predicted_turns", []):
         td = (t.get("metrics") or {}).get("tactical_diameter_L")
         if td:

@@ -13,6 +13,7 @@ from collections.abc import Mapping
 
 from .html_format import as_text, interval, num
 from .report_schema import Report
+from .measurement_noise import agrees
 
 PARTS = (("s_id", "identification"), ("s_struct", "structure"), ("s_extrap", "extrapolation"))
 
@@ -68,7 +69,8 @@ def _validation(r: Report, sec: Mapping) -> dict | None:
         iv, meas = interval(m.get("final_low"), m.get("final_high")), m["measured"]
         held = None if iv is None or not _real(meas) else m["final_low"] <= meas <= m["final_high"]
         rows.append({"record": m["record"], "metric": m["metric"], "measured": num(meas),
-                     "final": num(m["final"]), "interval": iv, "held": held,
+                     "measured_interval": interval(m.get("measured_low"), m.get("measured_high")),
+                     "final": num(m["final"]), "interval": iv, "held": held, "agrees": agrees(m),
                      **_spread(m.get("final_uncertainty") or {}), "carriers": _carriers(m.get("carriers"))})
     return {"records": recs, "rows": rows} if recs or rows else None
 

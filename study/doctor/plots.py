@@ -25,6 +25,8 @@ import math
 
 import numpy as np
 
+from .measurement_noise import agrees
+
 WIDTH = 9.5  # in; at DPI this is about 1050 px, shown at the page's ~900 px
 DPI = 110
 C_MEAS, C_BASE, C_FINAL, C_WARN = "0.15", "C3", "C0", "#b00020"
@@ -343,8 +345,10 @@ INTERVAL_METRICS = {"tactical_diameter_L": "tactical diameter [L]", "advance_L":
 
 def metric_intervals(rows: list) -> bytes | None:
     """Per manoeuvre metric (:data:`INTERVAL_METRICS`), each validation record's measured value
-    (black) against the final model's prediction with its 90 % interval (blue) and the baseline's
-    (red, open); each panel's title counts the measured values inside the final model's intervals.
+    with its own noise's 90 % interval (black) against the final model's prediction with its 90 %
+    interval (blue) and the baseline's (red, open); each panel's title counts the measured values
+    inside the final model's intervals, and the pairs that agree once the measured value's noise
+    is included (``study.doctor.measurement_noise.agrees``).
     None when no row has a measured value and an
     interval."""
     from matplotlib.lines import Line2D
@@ -376,9 +380,13 @@ def metric_intervals(rows: list) -> bytes | None:
             bar(ax, x - 0.2, col["baseline"], col["baseline_low"], col["baseline_high"], fmt="o", mfc="white",
                 color=C_BASE, lw=1.0)
         bar(ax, x + 0.2, col["final"], col["final_low"], col["final_high"], fmt="s", color=C_FINAL, lw=1.2)
-        ax.plot(x, col["measured"], "o", color=C_MEAS, ms=6)
+        lo = np.array([_f(r.get("measured_low", r["measured"])) for r in sel])
+        hi = np.array([_f(r.get("measured_high", r["measured"])) for r in sel])
+        bar(ax, x, col["measured"], lo, hi, fmt="o", color=C_MEAS, lw=1.0)
         inside = int(np.sum((col["measured"] >= col["final_low"]) & (col["measured"] <= col["final_high"])))
-        ax.set_title(f"{label}: {inside} of {len(sel)} measured inside the final model's 90 % interval")
+        agree = sum(bool(agrees(r)) for r in sel)
+        ax.set_title(f"{label}: {inside} of {len(sel)} measured inside the final model's 90 % interval; {agree} "
+                     "agree with the measured value's own noise", fontsize=9)
         names = [str(r["record"]) for r in sel]
         tilt = len(sel) * max(len(n) for n in names) > 60  # record names that would overlap side by side
         ax.set_xticks(x, names, rotation=30 if tilt else 0,
@@ -386,7 +394,7 @@ def metric_intervals(rows: list) -> bytes | None:
         ax.set_xlim(-0.6, len(sel) - 0.4)
         ax.ticklabel_format(axis="y", useOffset=False)
         ax.set_ylabel(label.split(" [")[-1].rstrip("]") if "[" in label else "")
-    handles = [Line2D([], [], marker="o", color=C_MEAS, ls="", label="measured"),
+    handles = [Line2D([], [], marker="o", color=C_MEAS, label="measured, its noise's 90 %"),
                Line2D([], [], marker="s", color=C_FINAL, label="final model, 90 % interval")]
     if baseline_drawn:
         handles.append(Line2D([], [], marker="o", mfc="white", color=C_BASE, label="baseline, 90 % interval"))

@@ -173,6 +173,21 @@ def combine(value: float, s_id: float, s_struct: float, s_extrap: float, level: 
             "half_width": float(math.exp(w) - 1.0)}
 
 
+def agrees(value: float, low: float, high: float, measured: float, s_meas: float = 0.0,
+           level: float = 0.9) -> bool | None:
+    """Whether a measured value agrees with a prediction whose ``level`` interval is ``low`` ..
+    ``high`` once the measurement's own noise (``s_meas``, log scale) is added: |log(measured /
+    value)| <= z sqrt(s^2 + s_meas^2), s = log(high / low) / (2 z) the interval's log sd. None
+    when either has no positive finite value."""
+    vals = (value, low, high, measured)
+    if not all(isinstance(x, (int, float)) and math.isfinite(x) and x > 0 for x in vals):
+        return None
+    z = z_of(level)
+    s = math.log(high / low) / (2.0 * z)
+    sm = float(s_meas) if isinstance(s_meas, (int, float)) and math.isfinite(s_meas) else 0.0
+    return bool(abs(math.log(measured / value)) <= z * math.hypot(s, sm))
+
+
 def tie_mixture(readings, level: float = 0.9) -> dict:
     """The interval of a metric when the records cannot tell two or more readings of them apart
     (the doctor's verdict is a tie): ``readings`` holds each reading's ``(value, low, high)``,

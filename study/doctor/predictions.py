@@ -39,7 +39,8 @@ METHOD = (
     "90 % interval = the value times exp(+-1.645 s), s^2 = s_id^2 + max(s_struct, s_extrap)^2 on the log scale "
     "(assumption: independent, normal relative errors of identification and of the model's form; s_struct and "
     "s_extrap are two estimates of the latter, so the larger is taken rather than both added). s_id: the spread of "
-    "the metric over draws from the fit's posterior; s_struct: its root-mean-square log deviation over the other "
+    "the metric over draws from the fit's posterior (its linear unknowns and its effects' nonlinear parameters, "
+    "the latter by a Laplace approximation of the profile training error); s_struct: its root-mean-square log deviation over the other "
     "models the records cannot tell apart (training and validation errors within the doctor's tie of the model's "
     "own or lower; the anchor's sd halved and doubled; the anchor set itself when it fits the training records as "
     "well); s_extrap = sqrt(s0^2 + (k d)^2): the relative error of the training records predicted from the others "
@@ -50,7 +51,9 @@ METHOD = (
     "errors when two or more training records carry it, else those of the RMS yaw rate at speed (for a turn's "
     "advance, those of the zigzags' initial turning time, the turn's onset, where they are the larger). Not covered: "
     "errors the training records share with the prediction (a sensor bias, the facility), a growth steeper than "
-    "linear beyond the farthest held-out record, and conditions no record has (another depth, speed or loading).")
+    "linear beyond the farthest held-out record, and conditions no record has (another depth, speed or loading). "
+    "The interval is for the ship's metric: a measured value's own noise is its own interval (measured_low, "
+    "measured_high), and the two agree when their log difference is within 1.645 sqrt(s^2 + s_meas^2).")
 
 
 def _finite(x) -> bool:

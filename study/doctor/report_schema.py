@@ -144,6 +144,9 @@ class ManoeuvreMetricRow(TypedDict):
     final_low: NotRequired[float]  # the final model's 90 % interval
     final_high: NotRequired[float]
     final_uncertainty: NotRequired[dict[str, Any]]  # its parts: s_id, s_struct, s_extrap, why, caveat...
+    measured_low: NotRequired[float]  # the measured value's own 90 % interval (its record's noise, replayed)
+    measured_high: NotRequired[float]
+    measured_noise: NotRequired[dict[str, Any]]  # s_meas (sd of the log), probes
     carriers: NotRequired[list[dict[str, Any]]]  # the coefficients that carry the prediction, each a sentence
     baseline_low: NotRequired[float]  # the baseline's 90 % interval
     baseline_high: NotRequired[float]

@@ -4,7 +4,10 @@ extrapolates and which coefficients carry it (the method: ``study.doctor.predict
 For the baseline and the final model, every ``maneuver_metrics`` row of a validation record gets
 ``<model>_low`` and ``<model>_high`` (the 90 % interval) and ``<model>_uncertainty`` (its parts);
 the final model's rows get ``carriers`` (all but the lengths in metres, whose twins in ship lengths
-have them) and the record's ``extrapolation``. The models the doctor cannot tell apart from one of
+have them), the record's ``extrapolation`` and the measured value's own interval
+(``measured_low``, ``measured_high``, ``measured_noise``: the record's noise replayed,
+``study.doctor.measurement_noise``), with which the prediction and the measurement are compared
+(``measurement_noise.agrees``). The models the doctor cannot tell apart from one of
 them are the other models it fitted whose training and (scored) validation errors are within ``tie``
 of that model's or lower -- its candidates, ladder steps and their equation-error twins, minus the
 physically implausible ones and those whose effect parameters sit on a bound of their search box
@@ -25,6 +28,7 @@ import math
 
 import numpy as np
 
+from . import measurement_noise as mn
 from . import model_error as me
 from . import prediction_interval as pi
 from .predictions import METHOD, TURNS, carriers, extrapolation_text, metric_interval
@@ -108,8 +112,9 @@ def model_uncertainty(doctor, ev, rows: list, frames: dict, role: str, tie: floa
                       sensitivity: bool = False) -> dict:
     """Fill ``<role>_low``, ``<role>_high`` and ``<role>_uncertainty`` of the
     ``maneuver_metrics`` rows of the model ``ev`` (``frames``: its replays, by record), and with
-    ``sensitivity`` the rows' ``carriers`` and the records' extrapolation. Returns the section's
-    part for this model."""
+    ``sensitivity`` the rows' ``carriers``, the records' extrapolation and the measured values'
+    own intervals (``study.doctor.measurement_noise``, replayed by this model). Returns the
+    section's part for this model."""
     from study.records.maneuver_metrics import manoeuvre_start
 
     pb0 = doctor.problem
@@ -143,6 +148,10 @@ def model_uncertainty(doctor, ev, rows: list, frames: dict, role: str, tie: floa
                       for _, e in usable]
         alt_frames += [pb.predict(_reduced(doctor, pb, ft, name, fold), c, info) for _, pb, ft in settings]
         alt_vals = _record_values(doctor, name, df, alt_frames)
+        if sensitivity:
+            spread = _measurement_spread(doctor, problem, fit, name, df, info, fold, k)
+            for row in by_record[name]:
+                mn.measured_interval(row, spread, level)
         env_tr = cal["envelope"] if fold is None else pi.state_envelope(problem.records, L, U0)
         env_pr = pi.state_envelope(pi.running(frames[name], c), L, U0) if frames.get(name) is not None else {}
         dist = pi.envelope_distance(env_pr, env_tr) if env_pr else {"distance": math.nan, "excess": {},
@@ -169,6 +178,27 @@ def model_uncertainty(doctor, ev, rows: list, frames: dict, role: str, tie: floa
                              "the replay diverged: no states to compare", "caveat": caveats[0] if caveats else None}
     return {"alternatives": [a[0] for a in alts] + [s[0] for s in settings], "excluded": excluded,
             "notes": notes + cal["notes"], "records": records, "calibration": calibration_summary(cal)}
+
+
+def _measurement_spread(doctor, problem, fit, name: str, df, info, fold, seed: int) -> dict:
+    """{metric: {'s_meas', 'probes'}} of a validation record: its noise's spread of the
+    comparison with ``fit``'s replay (``measurement_noise.comparison_spread``); {} for a record
+    without noise."""
+    from study.records.maneuver_metrics import manoeuvre_start
+
+    sd = mn.record_noise(df)
+    if not sd:
+        return {}
+    L, U0 = doctor.problem.L, doctor.problem.U0
+    t0 = manoeuvre_start(df)
+
+    def replayed(x):
+        c = me.cut(x, t0)
+        f = doctor.predict(problem, fit, c, info, fold) if c is not None else None
+        return me.metric_values(name, x, f, L, U0)
+
+    return mn.comparison_spread(mn.noisy_copies(df, sd, seed=seed),
+                                lambda x: me.metric_values(name, x, x, L, U0), replayed)
 
 
 def calibration_summary(cal: dict) -> dict:
@@ -299,6 +329,12 @@ def summary(mm: list, sec: dict) -> list:
     held = [r for r in mm if np.isfinite(r.get("measured", np.nan)) and np.isfinite(r.get("final_low", np.nan))]
     if held:
         k = sum(r["final_low"] <= r["measured"] <= r["final_high"] for r in held)
-        out.append(f"the final model's 90 % intervals hold the measured value for {k} of {len(held)} validation "
-                   "metrics")
+        noisy = [r for r in held if "measured_noise" in r]
+        text = (f"the final model's 90 % intervals hold the measured value for {k} of {len(held)} validation "
+                "metrics")
+        if noisy:
+            k2 = sum(bool(mn.agrees(r)) for r in held)
+            text += (f"; with the measured values' own noise (each record's, added again {mn.PROBES} times) the "
+                     f"prediction and the measurement agree on {k2} of {len(held)}")
+        out.append(text)
     return out

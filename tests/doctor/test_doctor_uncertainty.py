@@ -69,6 +69,19 @@ def test_every_predicted_metric_has_an_interval_around_it_with_its_parts(report)
 
 
 @pytest.mark.slow
+def test_a_measured_value_carries_its_record_s_noise_and_the_report_counts_agreement(report):
+    _, rep, html = report
+    turn = {r["metric"]: r for r in rep["maneuver_metrics"] if r["record"].endswith("turning_35")}
+    for m in ("tactical_diameter_L", "advance_L", "transfer_L"):
+        r = turn[m]
+        assert r["measured_low"] < r["measured"] < r["measured_high"], r
+        assert r["measured_noise"]["s_meas"] > 0 and r["measured_noise"]["probes"] >= 8
+    summary = rep["prediction_uncertainty"]["summary"][-1]
+    assert "hold the measured value" in summary and "agree on" in summary
+    assert "its noise, 90 %" in html and "Agree, noise included" in html
+
+
+@pytest.mark.slow
 def test_the_report_predicts_both_turns_and_says_they_extrapolate(report):
     _, rep, page = report
     turns = rep["prediction_uncertainty"]["predicted_turns"]

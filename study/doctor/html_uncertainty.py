@@ -71,8 +71,20 @@ def _validation(r: Report, sec: Mapping) -> dict | None:
         rows.append({"record": m["record"], "metric": m["metric"], "measured": num(meas),
                      "measured_interval": interval(m.get("measured_low"), m.get("measured_high")),
                      "final": num(m["final"]), "interval": iv, "held": held, "agrees": agrees(m),
+                     "tie": _tie_cell(m),
                      **_spread(m.get("final_uncertainty") or {}), "carriers": _carriers(m.get("carriers"))})
-    return {"records": recs, "rows": rows} if recs or rows else None
+    return {"records": recs, "rows": rows, "tie": any(x["tie"] for x in rows)} if recs or rows else None
+
+
+def _tie_cell(m: Mapping) -> str:
+    """Under a tie, the tied readings' mixture with its interval and whether it holds the measured
+    value; empty otherwise."""
+    iv = interval(m.get("tie_low"), m.get("tie_high"))
+    if iv is None:
+        return ""
+    held = m["tie_low"] <= m["measured"] <= m["tie_high"] if _real(m.get("measured")) else None
+    return f"{num(m.get('tie'))} ({iv[0]}\u2013{iv[1]})" + ("" if held is None else "; holds it" if held else
+                                                          "; misses it")
 
 
 def _calibration(sec: Mapping) -> list:

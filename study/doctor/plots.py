@@ -30,6 +30,7 @@ from .measurement_noise import agrees
 WIDTH = 9.5  # in; at DPI this is about 1050 px, shown at the page's ~900 px
 DPI = 110
 C_MEAS, C_BASE, C_FINAL, C_WARN = "0.15", "C3", "C0", "#b00020"
+C_TIE = "C2"
 #: the two candidates of a weak verdict, drawn beside the baseline (Okabe & Ito's colour-blind-safe orange and green)
 C_PAIR = ("#E69F00", "#009E73")
 
@@ -346,7 +347,8 @@ INTERVAL_METRICS = {"tactical_diameter_L": "tactical diameter [L]", "advance_L":
 def metric_intervals(rows: list) -> bytes | None:
     """Per manoeuvre metric (:data:`INTERVAL_METRICS`), each validation record's measured value
     with its own noise's 90 % interval (black) against the final model's prediction with its 90 %
-    interval (blue) and the baseline's (red, open); each panel's title counts the measured values
+    interval (blue), the baseline's (red, open) and, under a tie, the tied readings' mixture
+    (green); each panel's title counts the measured values
     inside the final model's intervals, and the pairs that agree once the measured value's noise
     is included (``study.doctor.measurement_noise.agrees``).
     None when no row has a measured value and an
@@ -370,7 +372,7 @@ def metric_intervals(rows: list) -> bytes | None:
     fig, axes = plt.subplots(len(panels), 1, figsize=(min(WIDTH, max(6.0, 0.55 * n_rec + 3.0)),
                                                       2.3 * len(panels) + 0.9), layout="constrained",
                              squeeze=False)
-    baseline_drawn = False
+    baseline_drawn = tie_drawn = False
     for ax, (label, sel) in zip(axes[:, 0], panels):
         x = np.arange(len(sel))
         col = {k: np.array([_f(r.get(k)) for r in sel]) for k in ("measured", "final", "final_low", "final_high",
@@ -380,6 +382,10 @@ def metric_intervals(rows: list) -> bytes | None:
             bar(ax, x - 0.2, col["baseline"], col["baseline_low"], col["baseline_high"], fmt="o", mfc="white",
                 color=C_BASE, lw=1.0)
         bar(ax, x + 0.2, col["final"], col["final_low"], col["final_high"], fmt="s", color=C_FINAL, lw=1.2)
+        if all(ok(r, "tie", "tie_low", "tie_high") for r in sel):
+            tie_drawn = True
+            t = {k: np.array([_f(r.get(k)) for r in sel]) for k in ("tie", "tie_low", "tie_high")}
+            bar(ax, x + 0.4, t["tie"], t["tie_low"], t["tie_high"], fmt="D", color=C_TIE, lw=1.2)
         lo = np.array([_f(r.get("measured_low", r["measured"])) for r in sel])
         hi = np.array([_f(r.get("measured_high", r["measured"])) for r in sel])
         bar(ax, x, col["measured"], lo, hi, fmt="o", color=C_MEAS, lw=1.0)
@@ -391,13 +397,15 @@ def metric_intervals(rows: list) -> bytes | None:
         tilt = len(sel) * max(len(n) for n in names) > 60  # record names that would overlap side by side
         ax.set_xticks(x, names, rotation=30 if tilt else 0,
                       ha="right" if tilt else "center", fontsize=8)
-        ax.set_xlim(-0.6, len(sel) - 0.4)
+        ax.set_xlim(-0.6, len(sel) - 0.4 + (0.2 if tie_drawn else 0.0))
         ax.ticklabel_format(axis="y", useOffset=False)
         ax.set_ylabel(label.split(" [")[-1].rstrip("]") if "[" in label else "")
     handles = [Line2D([], [], marker="o", color=C_MEAS, label="measured, its noise's 90 %"),
                Line2D([], [], marker="s", color=C_FINAL, label="final model, 90 % interval")]
     if baseline_drawn:
         handles.append(Line2D([], [], marker="o", mfc="white", color=C_BASE, label="baseline, 90 % interval"))
+    if tie_drawn:
+        handles.append(Line2D([], [], marker="D", color=C_TIE, label="the tied readings mixed, 90 %"))
     fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), frameon=False)
     fig.suptitle("Manoeuvre metrics: measured against predicted, with 90 % intervals")
     return _png(fig)

@@ -230,7 +230,8 @@ def _manoeuvres(doctor, rep: dict, meas: dict, pb: dict, pf: dict) -> tuple:
     for name, df in meas.items():
         mm += maneuver_metrics(name, df, mb.get(name), mf.get(name), doctor.problem.L)
     candidate_metrics(doctor, rep, meas, mb)
-    uncertainty = annotate(doctor, mm, base, final, mb, mf)  # intervals, extrapolation, carriers; predicted turns
+    uncertainty = annotate(doctor, mm, base, final, mb, mf, meas=meas,  # intervals, extrapolation, carriers, turns
+                           frames_of=lambda ev: manoeuvre_predictions(doctor, ev, predictions(doctor, ev)))
     return mm, uncertainty
 
 

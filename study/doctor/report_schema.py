@@ -147,6 +147,10 @@ class ManoeuvreMetricRow(TypedDict):
     measured_low: NotRequired[float]  # the measured value's own 90 % interval (its record's noise, replayed)
     measured_high: NotRequired[float]
     measured_noise: NotRequired[dict[str, Any]]  # s_meas (sd of the log), probes
+    tie: NotRequired[float]  # under a tie: the tied readings' equal mixture (its median), with its 90 % interval
+    tie_low: NotRequired[float]
+    tie_high: NotRequired[float]
+    tie_readings: NotRequired[dict[str, Any]]  # {effect: {value, low, high}}
     carriers: NotRequired[list[dict[str, Any]]]  # the coefficients that carry the prediction, each a sentence
     baseline_low: NotRequired[float]  # the baseline's 90 % interval
     baseline_high: NotRequired[float]

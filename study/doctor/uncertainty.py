@@ -35,6 +35,10 @@ from .predictions import METHOD, TURNS, carriers, extrapolation_text, metric_int
 
 #: posterior draws per model and record
 DRAWS = 32
+#: metrics an open-loop replay reproduces by construction (it reverses its rudder when the ship did): no prediction,
+#: so no interval and no count
+BY_CONSTRUCTION = {"period": "an open-loop replay reverses its rudder when the ship did: its period is the "
+                             "record's by construction, not a prediction"}
 def _mean_on(ev, records: list) -> float:
     """An evaluation's mean validation error over ``records`` (inf with none)."""
     return float(np.mean(ev.per_record(records))) if records else math.inf
@@ -158,6 +162,9 @@ def model_uncertainty(doctor, ev, rows: list, frames: dict, role: str, tie: floa
                                                                     "state": None}
         for row in by_record[name]:
             m = row["metric"]
+            if m in BY_CONSTRUCTION:
+                row[f"{role}_uncertainty"] = {"why": BY_CONSTRUCTION[m]}
+                continue
             iv = metric_interval(row[role], [v.get(m, math.nan) for v in vals[:len(sets)]],
                                  [v.get(m, math.nan) for v in alt_vals], dist["distance"], me.growth_for(cal, m),
                                  level)
@@ -266,21 +273,60 @@ def tie_turns(doctor, tie: float, level: float = 0.9) -> dict | None:
     return {"readings": list(evs), "turns": turns}
 
 
-def annotate(doctor, mm: list, base, final, mb: dict, mf: dict, level: float = 0.9) -> dict:
+def tie_records(doctor, mm: list, meas: dict, frames_of, tie: float, level: float = 0.9) -> dict | None:
+    """When the verdict is a tie, every validation metric as each tied reading predicts it (its
+    replays ``frames_of(evaluation)``, its own interval from :func:`model_uncertainty`) and their
+    equal mixture (``prediction_interval.tie_mixture``), as :func:`tie_turns` does for the turns:
+    the final model is then the baseline, which both readings beat, and the records favour
+    neither. Sets ``tie``, ``tie_low``, ``tie_high`` and ``tie_readings`` ({effect: {value, low,
+    high}}) of the ``mm`` rows; returns ``{'readings', 'rows'}`` (how many rows got a mixture), or
+    None without a tie."""
+    from study.records.maneuver_metrics import maneuver_metrics
+
+    evs = doctor.result.get("tie_evaluations") or {}
+    if len(evs) < 2:
+        return None
+    L = doctor.problem.L
+    each = {}
+    for effect, ev in evs.items():
+        frames = frames_of(ev)
+        rows = [r for name, df in meas.items() for r in maneuver_metrics(name, df, None, frames.get(name), L)]
+        model_uncertainty(doctor, ev, rows, frames, "final", tie, level)
+        each[effect] = {(r["record"], r["metric"]): r for r in rows}
+    n = 0
+    for row in mm:
+        key = (row["record"], row["metric"])
+        got = {e: rows[key] for e, rows in each.items() if key in rows}
+        if len(got) < len(each) or row["metric"] in BY_CONSTRUCTION:
+            continue
+        readings = {e: {"value": r["final"], "low": r.get("final_low", math.nan), "high": r.get("final_high", math.nan)}
+                    for e, r in got.items()}
+        mix = pi.tie_mixture([(x["value"], x["low"], x["high"]) for x in readings.values()], level)
+        if not np.isfinite(mix["low"]):
+            continue
+        row["tie"], row["tie_low"], row["tie_high"], row["tie_readings"] = mix["value"], mix["low"], mix["high"], readings
+        n += 1
+    return {"readings": list(evs), "rows": n}
+
+
+def annotate(doctor, mm: list, base, final, mb: dict, mf: dict, level: float = 0.9, meas: dict | None = None,
+             frames_of=None) -> dict:
     """Fill the intervals of the ``maneuver_metrics`` rows ``mm`` (baseline and final; the
-    final's carriers and extrapolation) and return the report's ``prediction_uncertainty``
-    section."""
+    final's carriers and extrapolation; under a tie, with ``meas`` (the validation records by
+    name) and ``frames_of`` (an evaluation's replays of them), the tied readings' mixture) and
+    return the report's ``prediction_uncertainty`` section."""
     tie = doctor.opt.tie
     sec = {"level": level, "method": METHOD, "errors": []}
     parts = (("final", lambda: model_uncertainty(doctor, final, mm, mf, "final", tie, level, sensitivity=True)),
              ("baseline", lambda: model_uncertainty(doctor, base, mm, mb, "baseline", tie, level)),
              ("predicted_turns", lambda: predicted_turns(doctor, final, tie, level)),
-             ("tie", lambda: tie_turns(doctor, tie, level)))
+             ("tie", lambda: tie_turns(doctor, tie, level)),
+             ("tie_records", lambda: tie_records(doctor, mm, meas, frames_of, tie, level) if frames_of else None))
     for key, part in parts:
         try:
             sec[key] = part()
         except Exception as e:  # noqa: BLE001 -- a part that fails is reported, the report is still written
-            sec[key] = [] if key == "predicted_turns" else None if key == "tie" else {
+            sec[key] = [] if key == "predicted_turns" else None if key in ("tie", "tie_records") else {
                 "records": {}, "alternatives": [], "excluded": [], "notes": [], "calibration": {}}
             sec["errors"].append(f"{key}: could not be computed ({type(e).__name__}: {e})")
     sec["training_envelope"] = pi.state_envelope(doctor.problem.records, doctor.problem.L, doctor.problem.U0)
@@ -337,4 +383,11 @@ def summary(mm: list, sec: dict) -> list:
             text += (f"; with the measured values' own noise (each record's, added again {mn.PROBES} times) the "
                      f"prediction and the measurement agree on {k2} of {len(held)}")
         out.append(text)
+    tied = [r for r in mm if np.isfinite(r.get("measured", np.nan)) and np.isfinite(r.get("tie_low", np.nan))]
+    if tied:
+        k = sum(r["tie_low"] <= r["measured"] <= r["tie_high"] for r in tied)
+        k0 = sum(r.get("final_low", np.inf) <= r["measured"] <= r.get("final_high", -np.inf) for r in tied)
+        out.append(f"the verdict is a tie, so each validation metric is also predicted by both readings, weighted "
+                   f"equally: their mixture's 90 % intervals hold the measured value for {k} of {len(tied)} (the "
+                   f"final model, the baseline, for {k0})")
     return out

@@ -147,3 +147,26 @@ def test_a_tie_predicts_the_turn_with_both_readings_mixed_not_with_one(tied):
     assert "The verdict is a tie: the turns as current and wind predict them" in html
     assert num(td["value"]) in html
     assert all(f"{e} {num(x['value'])} ({num(x['low'])}-{num(x['high'])})" in html for e, x in td["readings"].items())
+
+
+def test_a_tie_gives_every_validation_metric_both_readings_mixed(tied):
+    """Under a tie the final model is the baseline, which both readings beat: each validation metric is also
+    predicted by each tied reading (its replay, its own interval) and by their equal mixture, which holds both
+    readings' values; the period, which a replay copies from the record, gets none."""
+    from study.doctor.report import manoeuvre_predictions, predictions
+    from study.doctor.uncertainty import BY_CONSTRUCTION, tie_records
+    from study.records.maneuver_metrics import maneuver_metrics
+
+    d, _ = tied
+    meas = dict(zip(d.val_names, d.val_df))
+    base = d.result["base"]
+    mb = manoeuvre_predictions(d, base, predictions(d, base))
+    mm = [r for n, df in meas.items() for r in maneuver_metrics(n, df, mb.get(n), mb.get(n), d.problem.L)]
+    got = tie_records(d, mm, meas, lambda ev: manoeuvre_predictions(d, ev, predictions(d, ev)), d.opt.tie)
+    rows = [r for r in mm if "tie" in r]
+    assert got["readings"] == ["current", "wind"] and got["rows"] == len(rows) >= 3
+    for r in rows:
+        assert r["metric"] not in BY_CONSTRUCTION and set(r["tie_readings"]) == {"current", "wind"}
+        values = [x["value"] for x in r["tie_readings"].values()]
+        assert r["tie_low"] <= min(values) <= max(values) <= r["tie_high"], r
+    assert not any("tie" in r for r in mm if r["metric"] in BY_CONSTRUCTION)

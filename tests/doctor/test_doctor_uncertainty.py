@@ -56,6 +56,9 @@ def test_every_predicted_metric_has_an_interval_around_it_with_its_parts(report)
             # s_extrap may be 0 here: the model's form is the truth's, so the held-out errors can all lie within
             # the held-out fits' own identification spread, which is taken out of them
             assert u["s_id"] > 0 and u["s_extrap"] >= 0 and u["draws"] >= 16
+    for r in rep["maneuver_metrics"]:  # a replay copies the period from the record: no prediction, no interval
+        if r["metric"] == "period":
+            assert "final_low" not in r and "record's by construction" in r["final_uncertainty"]["why"]
     turn = {r["metric"]: r for r in rows if r["record"].endswith("turning_35")}
     # the turn is replayed far outside the zigzags' envelope and its intervals say which coefficients carry it
     assert turn["tactical_diameter_L"]["final_uncertainty"]["distance"] > 0.3

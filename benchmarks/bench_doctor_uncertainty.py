@@ -5,11 +5,11 @@ Workload: the records of ``bench_doctor.py`` (the 7 m KVLCC2 with a hidden curre
 20/20 zigzags and a random rudder to train, a 20/10 zigzag and a 35 deg turn to validate), the vessel's own
 coefficients (``known``: the current's two components are the only unknowns, so the draws are theirs alone) and
 the MMG hull identified and anchored (``mmg_hull``). Each diagnosis runs once; its report is then written three
-times in the same process, in turn: as before these two parts (the posterior draws of the linear unknowns alone, no
-measurement noise), with the nonlinear parameters' posterior, and with both (today's report). Reported: each
-report's wall time and its ratio to the first, and the final turn's tactical-diameter interval in each, so that
-what the time buys is beside it. ``--quick``: 100 s records. ``python benchmarks/bench_doctor_uncertainty.py``
-writes ``benchmarks/results/bench_doctor_uncertainty.json``.
+times in the same process (``unittest.mock`` switches the parts off), in turn: as before these two parts (the
+posterior draws of the linear unknowns alone, no measurement noise), with the nonlinear parameters' posterior, and
+with both (today's report). Reported: each report's wall time and its ratio to the first, and the final turn's
+tactical-diameter interval in each, so that what the time buys is beside it. ``--quick``: 100 s records.
+``python benchmarks/bench_doctor_uncertainty.py`` writes ``benchmarks/results/bench_doctor_uncertainty.json``.
 """
 from __future__ import annotations
 
@@ -19,13 +19,13 @@ import platform
 import sys
 import tempfile
 import time
+from contextlib import ExitStack
 from pathlib import Path
+from unittest import mock
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
-
-import pytest  # noqa: E402  (its MonkeyPatch switches the two parts off and on)
 
 from bench_doctor import KNOWN, records  # noqa: E402
 from study.configuration.compose import read_config  # noqa: E402
@@ -66,25 +66,23 @@ def main(argv=None):
         diag = time.perf_counter() - t0
         first = None
         for label, linear_only, no_noise in VARIANTS:
-            mp = pytest.MonkeyPatch()
-            if linear_only:
-                mp.setattr(EffectsProblem, "posterior", _linear_only)
-            if no_noise:
-                mp.setattr(measurement_noise, "record_noise", lambda df: {})
-            for cache in ("_calibrations", "_settings"):  # each variant computes its own parts
-                d.__dict__.pop(cache, None)
-            d.problem.__dict__.pop("_joint_posteriors", None)
-            try:
+            with ExitStack() as patches:
+                if linear_only:
+                    patches.enter_context(mock.patch.object(EffectsProblem, "posterior", _linear_only))
+                if no_noise:
+                    patches.enter_context(mock.patch.object(measurement_noise, "record_noise", lambda df: {}))
+                for cache in ("_calibrations", "_settings"):  # each variant computes its own parts
+                    d.__dict__.pop(cache, None)
+                d.problem.__dict__.pop("_joint_posteriors", None)
                 with tempfile.TemporaryDirectory() as tmp:
                     t0 = time.perf_counter()
                     write_report(d, Path(tmp), "kvlcc2_l7", model["name"])
                     wall = time.perf_counter() - t0
                     rep = json.loads((Path(tmp) / "report.json").read_text())
-            finally:
-                mp.undo()
             first = first or wall
             row = {"model": model["name"], "variant": label, "report_s": wall, "ratio": wall / first,
-                   "diagnosis_s": diag, "turn_td_L": _turn_td(rep), "summary": rep["prediction_uncertainty"]["summary"][-1]}
+                   "diagnosis_s": diag, "turn_td_L": _turn_td(rep),
+                   "summary": rep["prediction_uncertainty"]["summary"][-1]}
             out["runs"].append(row)
             print(f"{model['name']:<9} {label:<48} report {wall:6.1f} s  x{wall / first:4.2f}  "
                   f"(diagnosis {diag:5.1f} s)  turn TD {row['turn_td_L']} L")

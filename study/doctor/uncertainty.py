@@ -304,7 +304,7 @@ def tie_records(doctor, mm: list, meas: dict, frames_of, tie: float, level: floa
         mix = pi.tie_mixture([(x["value"], x["low"], x["high"]) for x in readings.values()], level)
         if not np.isfinite(mix["low"]):
             continue
-        row["tie"], row["tie_low"], row["tie_high"], row["tie_readings"] = mix["value"], mix["low"], mix["high"], readings
+        row.update(tie=mix["value"], tie_low=mix["low"], tie_high=mix["high"], tie_readings=readings)
         n += 1
     return {"readings": list(evs), "rows": n}
 

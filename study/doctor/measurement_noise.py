@@ -3,8 +3,8 @@ comparison of a replayed model with it.
 
 A manoeuvre metric read off a noisy record is itself noisy (a heading noise of 2 deg moves the
 instant a turn passes 90 deg, and with it the advance), and the replay it is compared with starts
-from the record's noisy first state and follows its noisy rudder. The model's 90 % interval is an
-interval for the metric of the ship; to compare it with a measurement, the measurement's error is
+from the record's noisy first state and follows its noisy rudder and propeller rpm. The model's 90 %
+interval is an interval for the metric of the ship; to compare it with a measurement, the measurement's error is
 added. It is measured on the record itself by a parametric bootstrap (Efron & Tibshirani 1993,
 ch. 6): each channel's white-noise sd is estimated by the difference method
 (``study.records.state_estimation.noise_std``), fresh noise at that level is added to the record
@@ -25,8 +25,8 @@ import pandas as pd
 #: copies of a record with fresh noise (a setting: the robust sd of 16 normal draws is within about 20 % of the true
 #: one, see ``prediction_interval.draws_log_sd``)
 PROBES = 16
-#: the channels a replay or a metric reads from the record
-CHANNELS = ("u", "v", "r", "x0", "y0", "psi", "delta")
+#: the channels a replay or a metric reads from the record (the rudder and the propeller's rpm drive the replay)
+CHANNELS = ("u", "v", "r", "x0", "y0", "psi", "delta", "n")
 #: a noise estimate below this share of the channel's size is the arithmetic's rounding on a clean record, not noise
 ROUNDING = 1e-9
 

@@ -39,6 +39,8 @@ DRAWS = 32
 #: so no interval and no count
 BY_CONSTRUCTION = {"period": "an open-loop replay reverses its rudder when the ship did: its period is the "
                              "record's by construction, not a prediction"}
+
+
 def _mean_on(ev, records: list) -> float:
     """An evaluation's mean validation error over ``records`` (inf with none)."""
     return float(np.mean(ev.per_record(records))) if records else math.inf
@@ -287,7 +289,7 @@ def tie_records(doctor, mm: list, meas: dict, frames_of, tie: float, level: floa
     if len(evs) < 2:
         return None
     L = doctor.problem.L
-    each = {}
+    each = {}  # effect -> {(record, metric): that reading's row}
     for effect, ev in evs.items():
         frames = frames_of(ev)
         rows = [r for name, df in meas.items() for r in maneuver_metrics(name, df, None, frames.get(name), L)]
@@ -296,7 +298,7 @@ def tie_records(doctor, mm: list, meas: dict, frames_of, tie: float, level: floa
     n = 0
     for row in mm:
         key = (row["record"], row["metric"])
-        got = {e: rows[key] for e, rows in each.items() if key in rows}
+        got = {e: by_key[key] for e, by_key in each.items() if key in by_key}
         if len(got) < len(each) or row["metric"] in BY_CONSTRUCTION:
             continue
         readings = {e: {"value": r["final"], "low": r.get("final_low", math.nan), "high": r.get("final_high", math.nan)}

@@ -81,9 +81,8 @@ def _transfer(store: ResultStore, args) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    """``python -m study results {rebuild,show,posterior,restamp,export,import} [--root results]``;
-    exit status 1 on an error, 2 on input refused."""
+def _parser() -> argparse.ArgumentParser:
+    """The command's parser: one sub-command per job on the results folder."""
     ap = argparse.ArgumentParser(prog="python -m study results", description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
     for name, help_ in (("rebuild", "rebuild runs.parquet and params.parquet from the records"),
@@ -112,7 +111,13 @@ def main(argv: list[str] | None = None) -> int:
         if name == "posterior":
             p.add_argument("run_id", help="the run (runs.parquet's run_id)")
             p.add_argument("--out", default=None, help="write the InferenceData to this netCDF file (.nc)")
-    args = ap.parse_args(argv)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m study results {rebuild,show,posterior,restamp,export,import} [--root results]``;
+    exit status 1 on an error, 2 on input refused."""
+    args = _parser().parse_args(argv)
     store = ResultStore(args.root)
     if args.cmd == "import":  # the one command that may make the folder
         return _transfer(store, args)
@@ -125,31 +130,47 @@ def main(argv: list[str] | None = None) -> int:
     if args.cmd == "posterior":
         return _posterior(store, args.run_id, args.out)
     if args.cmd == "restamp":
-        from study.store import fingerprint
-
-        done, left = store.restamp(fingerprint.code_fingerprint,
-                                   lambda old, new: not fingerprint.changed_components(old, new))
-        print(f"{done} record(s) restamped; {left} computed by code that has changed since (re-run them)")
-        runs, _ = store.collect(allow_empty=True)
-        print(f"runs: {store.runs_path.resolve()} ({len(runs)} runs)")
-        return 0
+        return _restamp(store)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # the same problems are printed from the report below
         try:
             if args.cmd == "rebuild":
-                runs, params = store.collect(allow_empty=args.allow_empty)
-                _say(store)
-                c = _counts(runs)
-                skipped = len(store.report.skipped)
-                print(f"{len(runs)} runs ({c['ok']} ok, {c['failed']} failed, {c['skipped']} skipped), "
-                      f"{len(params)} parameter rows" + (f"; {skipped} record(s) left out" if skipped else ""))
-                print(f"runs:   {store.runs_path.resolve()}")
-                print(f"params: {store.params_path.resolve()}")
-                return 1 if args.strict and skipped else 0
+                return _rebuild(store, args.allow_empty, args.strict)
             runs, _ = store.tables()  # fresh from the records, writes nothing
         except (ResultsFolderError, OSError, Timeout) as e:
             print(f"study results: error: {e}", file=sys.stderr)
             return 1
+    _show(store, runs)
+    return 0
+
+
+def _restamp(store: ResultStore) -> int:
+    """``restamp``: the executed-source fingerprint for records whose code is unchanged, then the tables."""
+    from study.store import fingerprint
+
+    done, left = store.restamp(fingerprint.code_fingerprint,
+                               lambda old, new: not fingerprint.changed_components(old, new))
+    print(f"{done} record(s) restamped; {left} computed by code that has changed since (re-run them)")
+    runs, _ = store.collect(allow_empty=True)
+    print(f"runs: {store.runs_path.resolve()} ({len(runs)} runs)")
+    return 0
+
+
+def _rebuild(store: ResultStore, allow_empty: bool, strict: bool) -> int:
+    """``rebuild``: both tables from the records; 1 under ``strict`` when a record was left out."""
+    runs, params = store.collect(allow_empty=allow_empty)
+    _say(store)
+    c = _counts(runs)
+    skipped = len(store.report.skipped)
+    print(f"{len(runs)} runs ({c['ok']} ok, {c['failed']} failed, {c['skipped']} skipped), "
+          f"{len(params)} parameter rows" + (f"; {skipped} record(s) left out" if skipped else ""))
+    print(f"runs:   {store.runs_path.resolve()}")
+    print(f"params: {store.params_path.resolve()}")
+    return 1 if strict and skipped else 0
+
+
+def _show(store: ResultStore, runs) -> None:
+    """``show``: the folder's leftovers, its counts by status and its last ten runs."""
     _say(store)
     for p, why, removable in store.leftovers():
         print(f"study results: {'crash leftover' if removable else 'temp file'} {p} ({why})"
@@ -159,23 +180,23 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{store.root.resolve()}: {len(runs)} runs ({c['ok']} ok, {c['failed']} failed, {c['skipped']} skipped)"
           + (f"; {skipped} record(s) left out" if skipped else "")
           + (f"; {store.report.stale} computed by older code" if store.report.stale else ""))
-    if len(runs):
-        cols = [col for col in ("run_id", "replicate", "status", "finished", "wall_time", "code_current",
-                                "cfg_vessel.name", "cfg_model.name", "cfg_structure.name", "cfg_estimator.name",
-                                "cfg_noise.name", "m_drift_median") if col in runs]
-        last = runs.sort_values("finished", kind="stable").tail(10)[cols].copy()
-        last["finished"] = last["finished"].dt.strftime("%Y-%m-%d %H:%M:%S")
-        last["wall_time"] = last["wall_time"].round(2)
-        if "m_drift_median" in last:  # the median relative error of the run's coefficients, in per cent
-            last["m_drift_median"] = (100 * last["m_drift_median"].astype(float)).round(1)
-            last = last.rename(columns={"m_drift_median": "drift_%"})
-        errs = runs.loc[last.index, "error"].map(
-            lambda e: str(e).strip().splitlines()[-1][:60] if isinstance(e, str) and e.strip() else "")
-        if errs.any():
-            last["error"] = errs
-        print("last runs:")
-        print(last.to_string(index=False))
-    return 0
+    if not len(runs):
+        return
+    cols = [col for col in ("run_id", "replicate", "status", "finished", "wall_time", "code_current",
+                            "cfg_vessel.name", "cfg_model.name", "cfg_structure.name", "cfg_estimator.name",
+                            "cfg_noise.name", "m_drift_median") if col in runs]
+    last = runs.sort_values("finished", kind="stable").tail(10)[cols].copy()
+    last["finished"] = last["finished"].dt.strftime("%Y-%m-%d %H:%M:%S")
+    last["wall_time"] = last["wall_time"].round(2)
+    if "m_drift_median" in last:  # the median relative error of the run's coefficients, in per cent
+        last["m_drift_median"] = (100 * last["m_drift_median"].astype(float)).round(1)
+        last = last.rename(columns={"m_drift_median": "drift_%"})
+    errs = runs.loc[last.index, "error"].map(
+        lambda e: str(e).strip().splitlines()[-1][:60] if isinstance(e, str) and e.strip() else "")
+    if errs.any():
+        last["error"] = errs
+    print("last runs:")
+    print(last.to_string(index=False))
 
 
 def command() -> None:

@@ -290,6 +290,10 @@ class Doctor:
                 "training_error": ev.training_error, "diverged": ev.diverged, **extra}
 
     def run(self) -> dict:
+        """The ladder: rank the candidates against the step's fit, take the first when it passes the
+        bar refined on the training replays, stop at a tie, a rejection or ``max_steps``; returns
+        (and keeps as ``result``) the ranking, the ladder, its fits, notes and the separating
+        manoeuvre."""
         t0 = time.perf_counter()
         base = self.evaluate(tuple(self.given), refine=bool(self.given))
         # the records a comparison can be made on: those whose baseline replay did not diverge (a diverged
@@ -316,13 +320,7 @@ class Doctor:
                 if step == 0:
                     ambiguous = amb
                 stab.append(st)
-                a, b = (next(r for r in ranking if r["effect"] == e) for e in amb)
-                notes.append(f"the data cannot tell {amb[0]} from {amb[1]} apart: validation errors "
-                             f"{a['validation_error']:.3g} and {b['validation_error']:.3g} are within "
-                             f"{100 * self.opt.tie:.0f} % (more varied manoeuvres would separate them)")
-                for r in ranking:
-                    if r["effect"] in amb:
-                        r["note"] = "cannot be told apart from " + amb[1 - amb.index(r["effect"])]
+                notes.append(self._tie_note(ranking, amb))
                 break
             if m is None:
                 if step == 0:
@@ -358,11 +356,7 @@ class Doctor:
             diverged[f"+ {m}"] = cand.diverged
             ladder.append(self._ladder_row(f"+ {m}", cand, scored))
             ladder_fits.append(cand.fit)
-        if missing is None and not ambiguous and scored:
-            notes.insert(0, "no candidate effect lowers the out-of-sample error significantly: no significant "
-                         "missing effect")
-        if notes and any("too little excitation" in n for n in notes) and missing:
-            notes.append(f"{missing} ranks first, but with little excitation the ranking is weak evidence")
+        self._closing_notes(notes, missing, ambiguous, scored)
         separating = self.separating(first_ranking or [], first_evs, missing, ambiguous, stab)
         if separating is not None:
             notes.append(separating["text"])
@@ -374,6 +368,25 @@ class Doctor:
                        "diverged": diverged, "scored": scored, "ladder_fits": ladder_fits,
                        "seconds": time.perf_counter() - t0}
         return self.result
+
+    def _tie_note(self, ranking: list, amb: list) -> str:
+        """The note on two candidates the data cannot tell apart; each of their ranking rows says so."""
+        a, b = (next(r for r in ranking if r["effect"] == e) for e in amb)
+        for r in ranking:
+            if r["effect"] in amb:
+                r["note"] = "cannot be told apart from " + amb[1 - amb.index(r["effect"])]
+        return (f"the data cannot tell {amb[0]} from {amb[1]} apart: validation errors "
+                f"{a['validation_error']:.3g} and {b['validation_error']:.3g} are within "
+                f"{100 * self.opt.tie:.0f} % (more varied manoeuvres would separate them)")
+
+    @staticmethod
+    def _closing_notes(notes: list, missing, ambiguous: list, scored: list) -> None:
+        """The notes on the ladder's outcome: no significant effect, or a first rank on little excitation."""
+        if missing is None and not ambiguous and scored:
+            notes.insert(0, "no candidate effect lowers the out-of-sample error significantly: no significant "
+                         "missing effect")
+        if notes and any("too little excitation" in n for n in notes) and missing:
+            notes.append(f"{missing} ranks first, but with little excitation the ranking is weak evidence")
 
     def _opening_notes(self, base, scored: list) -> list:
         """The report's notes known before any candidate is fitted: the input checks, the

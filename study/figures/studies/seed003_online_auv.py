@@ -126,40 +126,11 @@ def claim(b: Builder, r, p) -> list:
     10, 20 % of the truth; 1, 2, 5 % of the equation), the limit (20, 30, 40 samples), the
     estimator's own criterion (within 5 % of its own final value), the structure, the noise (20
     datasets) and the interval."""
-    from statsmodels.stats.proportion import proportion_confint
-
-    on = r[r["cfg_estimator.name"] == "lssvm_online"]
-    per_run = []
-    for _, run in on.iterrows():
-        for rel, sc in BANDS:
-            st = settling(b, run, p, rel, sc)
-            if st is None or not len(st):
-                continue
-            crits = [(f"truth band {rel:.0%} / {sc:.0%}", st["settled_truth_band"])]
-            if (rel, sc) == (REL_BAND, SCALED_BAND):
-                crits.append(("own final value, 5 %", st["settled_own_final_5pct"]))
-            for crit, v in crits:
-                for lim in LIMITS:
-                    per_run.append({"structure": run["cfg_structure.name"], "noise": run["cfg_noise.name"],
-                                    "sample_dt_LU": run.get("m_sample_dt_LU", np.nan), "criterion": crit,
-                                    "limit": lim, "all_within": bool(v.notna().all() and v.max() <= lim),
-                                    "median_samples": float(v.median()), "largest_samples": float(v.max()),
-                                    "never": ", ".join(st.loc[v.isna(), "name"])})
+    per_run = _settling_rows(b, r[r["cfg_estimator.name"] == "lssvm_online"], p)
     if not per_run:
         return []
-    d = pd.DataFrame(per_run)
     keys = ["criterion", "limit", "structure", "sample_dt_LU", "noise"]
-    rows = []
-    for k, g in d.groupby(keys, sort=False):
-        n, ok = len(g), int(g["all_within"].sum())
-        lo, hi = proportion_confint(ok, n, alpha=0.05, method="wilson") if n else (np.nan, np.nan)
-        nev = pd.Series([x for s_ in g["never"] for x in s_.split(", ") if x]).value_counts()
-        rows.append({**dict(zip(keys, k)), "datasets": n, "all_settle": ok, "share": ok / n, "share_low": lo,
-                     "share_high": hi, "verdict": _share_verdict(ok, n),
-                     "median_samples": float(g["median_samples"].median()),
-                     "largest_samples": float(g["largest_samples"].max()),
-                     "never_settle_most_often": ", ".join(f"{nm} ({c})" for nm, c in nev.head(5).items())})
-    t = pd.DataFrame(rows).sort_values(keys).reset_index(drop=True)
+    t = _settling_table(pd.DataFrame(per_run), keys)
     b.table(t, NAME, "claim_settling", "Du et al. 2016: per set-up, the datasets in which every coefficient settles "
             "within the limit (truth band: within x % of the truth or an error below y % of its equation; or within "
             "5 % of its own final value), the share with its Wilson 95 % interval and the verdict over datasets "
@@ -197,3 +168,44 @@ def claim(b: Builder, r, p) -> list:
                         f"{prim['median_samples']:g} samples, largest {prim['largest_samples']:g}; never settle: "
                         f"{prim['never_settle_most_often'] or 'none'}. {nz}. Every set-up and threshold is in table "
                         f"claim_settling."}]
+
+
+def _settling_rows(b: Builder, on, p) -> list:
+    """One row per run of the incremental LS-SVM, band, criterion and limit: whether every
+    derivative settled within the limit, and how many samples it took."""
+    per_run = []
+    for _, run in on.iterrows():
+        for rel, sc in BANDS:
+            st = settling(b, run, p, rel, sc)
+            if st is None or not len(st):
+                continue
+            crits = [(f"truth band {rel:.0%} / {sc:.0%}", st["settled_truth_band"])]
+            if (rel, sc) == (REL_BAND, SCALED_BAND):
+                crits.append(("own final value, 5 %", st["settled_own_final_5pct"]))
+            for crit, v in crits:
+                for lim in LIMITS:
+                    per_run.append({"structure": run["cfg_structure.name"], "noise": run["cfg_noise.name"],
+                                    "sample_dt_LU": run.get("m_sample_dt_LU", np.nan), "criterion": crit,
+                                    "limit": lim, "all_within": bool(v.notna().all() and v.max() <= lim),
+                                    "median_samples": float(v.median()), "largest_samples": float(v.max()),
+                                    "never": ", ".join(st.loc[v.isna(), "name"])})
+    return per_run
+
+
+def _settling_table(d: pd.DataFrame, keys: list) -> pd.DataFrame:
+    """Per set-up (``keys``): the datasets in which every derivative settles, their share with its
+    Wilson 95 % interval, the verdict over datasets and the derivatives that most often never
+    settle."""
+    from statsmodels.stats.proportion import proportion_confint
+
+    rows = []
+    for k, g in d.groupby(keys, sort=False):
+        n, ok = len(g), int(g["all_within"].sum())
+        lo, hi = proportion_confint(ok, n, alpha=0.05, method="wilson") if n else (np.nan, np.nan)
+        nev = pd.Series([x for s_ in g["never"] for x in s_.split(", ") if x]).value_counts()
+        rows.append({**dict(zip(keys, k)), "datasets": n, "all_settle": ok, "share": ok / n, "share_low": lo,
+                     "share_high": hi, "verdict": _share_verdict(ok, n),
+                     "median_samples": float(g["median_samples"].median()),
+                     "largest_samples": float(g["largest_samples"].max()),
+                     "never_settle_most_often": ", ".join(f"{nm} ({c})" for nm, c in nev.head(5).items())})
+    return pd.DataFrame(rows).sort_values(keys).reset_index(drop=True)

@@ -129,8 +129,7 @@ def _stale(study_dir: Path) -> int:
     return code_status(runs)["stale"]
 
 
-@pytest.mark.slow
-@pytest.mark.long  # every committed table's runs fingerprinted against the code on disk: run by hand before a commit
+@pytest.mark.slow  # every committed table's runs fingerprinted against the code on disk (seconds per study)
 @pytest.mark.parametrize("study", sorted(p.parent.name for p in ROOT.glob("*/table")))
 def test_every_committed_table_is_current(study):
     assert _stale(ROOT / study / "table") == 0, f"{study}: runs computed by code that has changed since; re-run it"

@@ -110,11 +110,10 @@ def test_emcee_records_its_diagnostics_and_chain():
     assert z["chain"].ndim == 3 and list(z["names"]) == ["x0", "x1", "x2", "log_sigma"]
 
 
-@pytest.mark.long  # minutes of many datasets: run by hand (python -m pytest -m long)
-@pytest.mark.slow
+@pytest.mark.slow  # minutes of many datasets
 def test_emcee_output_error_intervals_are_calibrated(kt1):
     """Output-error likelihood with its assumptions exact: an exact KT model, white noise on the outputs only
-    (r, psi), the initial states estimated. 40 datasets; about 15 minutes."""
+    (r, psi), the initial states estimated. 40 datasets; minutes."""
     v, model = kt1
     truth = model.truth()[0]
     clean = simulate(v, "zigzag_20_20", duration=300)

@@ -198,8 +198,7 @@ def test_the_heterogeneity_check_passes_the_exact_model_on_integral_rows(kt):
     assert all(1e-3 < t <= 1.0 for t in tails), tails
 
 
-@pytest.mark.long  # minutes of many datasets: run by hand (python -m pytest -m long)
-@pytest.mark.slow
+@pytest.mark.slow  # minutes of many datasets
 def test_regression_intervals_are_calibrated_per_structure(kt, kt_1s):
     """The statistical test: 60 noisy datasets per regression structure and sampling interval; 90 % intervals must
     cover the truth 80-97 % of the time (all parameters; none below 75 %). 2 min 36 s on this 2-core machine.

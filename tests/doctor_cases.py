@@ -19,7 +19,7 @@ import math
 
 from study.records.measure import DEFAULT_CHANNELS, MeasurementModel
 from study.run.pipeline import resolve_effects
-from study.records.schema import Record
+from study.records.schema import Record, with_estimated_states
 from study.configuration.compose import read_config
 from study.sim import load_vessel, simulate
 from study.sim.effects import ShallowWater
@@ -89,11 +89,17 @@ def make_records(example: dict, seed: int = 0, duration: float = 300.0, vessel_c
             if example.get("record_thrust"):
                 clean["thrust"] = true_thrust(load_vessel(cfg, effects), clean)
             chans = DEFAULT_CHANNELS + (("thrust",) if "thrust" in clean.columns else ())
+            estimated = example.get("states") == "estimated"  # a sea trial's record: positions and heading only
+            if estimated:
+                chans = ("psi", "x0", "y0", "delta")
             df = MeasurementModel(dt=0.1, noise_level=0.01, seed=seed + len(out),
                                   channels=chans).apply(clean.drop(columns="delta_cmd"))
             if h:
                 df["depth"] = float(h) * float(cfg["particulars"]["d"])
-            out.append((role, Record(data=df, meta={"name": f"{role}_{i}_{m}"})))
+            rec = Record(data=df, meta={"name": f"{role}_{i}_{m}"})
+            if estimated:  # u, v, r from the extended Kalman filter and smoother, as states=auto reads them
+                rec = with_estimated_states(Record(data=df.drop(columns=["u", "v", "r"]), meta=rec.meta))
+            out.append((role, rec))
     return [r for k, r in out if k == "train"], [r for k, r in out if k == "validate"], cfg
 
 

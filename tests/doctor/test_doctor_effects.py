@@ -134,6 +134,22 @@ def test_identified_hull_wind_and_a_late_steering_gear_are_both_named():
     assert p["rudder_delay"] == pytest.approx(1.0, abs=0.25)
 
 
+@pytest.mark.slow  # 30-40 s: the published hull, four records through the state estimator
+def test_a_current_is_named_from_positions_and_heading_only():
+    """Records as a sea trial gives them: positions and heading (1 % noise) with u, v, r estimated by the extended
+    Kalman filter and smoother. The current is named and its speed and direction found; the error falls by less
+    than with measured u, v, r (the replay is scored on the estimated states, whose own error no model removes),
+    but by more than a third."""
+    example = {**effect_config("current")["example"], "states": "estimated"}
+    d, rep, _ = run_case("current_estimated_states", example, False)
+    assert rep["missing_effect"] == "current", rep["verdict"]
+    p = rep["ranking"][0]["parameters"]
+    assert p["current_speed"] == pytest.approx(0.12 * U0, rel=0.2)
+    assert abs((p["current_direction_deg"] - 200.0 + 180.0) % 360.0 - 180.0) < 12.0
+    ladder = [s for s in rep["ladder"] if not s.get("rejected")]
+    assert ladder[1]["scored_error"] < (2.0 / 3.0) * ladder[0]["scored_error"]
+
+
 def test_a_users_own_effect_from_outside_the_package(monkeypatch):
     """docs/examples/effects: a yaw moment c n^2, class and YAML outside the package, found through
     effect_path. The truth: the simulator's constant yaw moment of the same size (n is constant in these

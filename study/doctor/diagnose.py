@@ -391,7 +391,7 @@ class Doctor:
     def _opening_notes(self, base, scored: list) -> list:
         """The report's notes known before any candidate is fitted: the input checks, the
         excitation, too few records for the consistency test, a diverged baseline."""
-        notes = list(self.check_messages) + self.excitation_notes()
+        notes = list(self.check_messages) + self.excitation_notes() + self._estimated_states_notes()
         n_val = len(scored)
         if n_val < MIN_RECORDS_FOR_TEST:
             notes.append(f"only {n_val} validation record(s) to compare on: the consistency test (a paired t-test "
@@ -408,6 +408,22 @@ class Doctor:
                          "manoeuvres), validate within the range it was identified on, or add training records "
                          "that cover the validation manoeuvres")
         return notes
+
+    def _estimated_states_notes(self) -> list:
+        """What records whose u, v, r were estimated from positions and heading (the state
+        estimator, ``states=auto``) do to the verdict: their replays are scored against the
+        estimates, whose own error no model removes, and start from the smoother's first sample,
+        its least accurate; so the error falls less than it would with measured states."""
+        records = list(self.train) + (list(self.validate) if self.validate else [])
+        est = [n for n, r in zip(self.train_names + (self.val_names if self.validate else []), records)
+               if (getattr(r, "meta", None) or {}).get("states") == "ekf"]
+        if not est:
+            return []
+        return [f"u, v, r of {len(est)} record(s) ({', '.join(est[:4])}{', ...' if len(est) > 4 else ''}) were "
+                "estimated from positions and heading: the replays are scored against those estimates, whose own "
+                "error no model removes, and each replay starts from the smoother's first estimate, its least "
+                "accurate; a named effect therefore lowers the error less than it would with measured velocities, "
+                "and a share below half says little about a cause no candidate models"]
 
     def _why_rejected(self, cand, scored: list, e_prev: float, e_new: float) -> str:
         """Why a ladder step, refined, fails the ranking's bar (diverged, not lower, or not lower

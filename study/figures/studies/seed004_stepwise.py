@@ -39,7 +39,7 @@ def build(b: Builder, runs, params, claims):
         d = d[d["cfg_noise.name"] != "none"]
         rr = finest(runs_all[(runs_all["cfg_vessel.name"] == v) & (runs_all["cfg_model.name"] == m)])[0]
         e = dataset_errors(d, "cfg_estimator.name", KEYS + ["replicate"], runs=rr[rr["cfg_noise.name"] != "none"])
-        panels.append((f"{v}, {m} ({kind} truth)", e))
+        panels.append((f"{v}, {m}\n({kind} truth)", e))  # two lines: three panels a row
     sub = sampling_label(finest(p)[0])
     paired_datasets_figure(b, NAME, panels, "de", "de_staged", "parallel_vs_stepwise",
                            f"Zheng & Xiao 2017: parallel processing (de) against step-by-step identification "

@@ -204,7 +204,11 @@ def datasets_per_cell(runs: pd.DataFrame) -> dict:
     """How many datasets each configuration (cell) of a study's table holds: the smallest and
     largest over the cells where something is drawn at random (measurement noise), and how many
     cells are one dataset by construction (no noise: every replicate would be the same records)."""
-    cfg = [c for c in runs.columns if c.startswith("cfg_") and c != "cfg_seed"]  # a seed sweep is datasets too
+    from study.store.records import NON_SCIENTIFIC_KEYS
+
+    # a seed sweep is datasets too; a setting that changes no science (a progress bar) splits no cell
+    cfg = [c for c in runs.columns if c.startswith("cfg_") and c != "cfg_seed"
+           and c[4:].split(".")[0] not in NON_SCIENTIFIC_KEYS]
     if not len(runs) or not cfg:
         return {}
     n = runs[cfg].astype(str).groupby(cfg, dropna=False).size()

@@ -135,6 +135,31 @@ def test_every_committed_table_is_current(study):
     assert _stale(ROOT / study / "table") == 0, f"{study}: runs computed by code that has changed since; re-run it"
 
 
+@pytest.mark.slow  # seconds per study: every committed table read
+@pytest.mark.parametrize("study", sorted(p.parent.name for p in ROOT.glob("*/table")))
+def test_every_noisy_cell_of_a_committed_table_has_twenty_datasets(study):
+    """The dataset is the unit: each configuration whose records carry random noise holds at least 20 datasets
+    (a noise-free configuration is one dataset by construction). Counted here by the configuration's scientific
+    keys (the run id's: not the progress bar, the launcher or the output folder)."""
+    from study.store.records import NON_SCIENTIFIC_KEYS
+
+    runs, _ = _table(study)
+    runs = runs[(runs["cfg_study"] == study) & runs["status"].isin(["ok", "failed"])]
+    keys = [c for c in runs.columns if c.startswith("cfg_") and c != "cfg_seed"
+            and c[4:].split(".")[0] not in NON_SCIENTIFIC_KEYS]
+    n = runs[keys].astype(str).groupby(keys, dropna=False).size()
+    noisy = runs[keys].astype(str).groupby(keys, dropna=False)["cfg_noise.name"].first() != "none"
+    assert n[noisy.to_numpy()].min() >= 20, n[noisy.to_numpy()].nsmallest(3)
+
+
+def test_datasets_per_cell_ignores_settings_that_change_no_science():
+    from study.figures import datasets_per_cell
+
+    runs = pd.DataFrame({"cfg_vessel.name": ["a"] * 4 + ["b"] * 2, "cfg_noise.name": ["low"] * 4 + ["none"] * 2,
+                         "cfg_progress": [True, False, True, False, True, True], "cfg_seed": 0})
+    assert datasets_per_cell(runs) == {"min": 4, "max": 4, "cells": 2, "one_dataset_cells": 1}
+
+
 def test_claims_md_says_which_runs_are_current():
     """The section on the runs behind each study agrees with each study's index (and so with its table)."""
     text = (ROOT / "CLAIMS.md").read_text(encoding="utf-8")

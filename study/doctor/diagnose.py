@@ -412,7 +412,7 @@ class Doctor:
     def _estimated_states_notes(self) -> list:
         """What records whose u, v, r were estimated from positions and heading (the state
         estimator, ``states=auto``) do to the verdict: their replays are scored against the
-        estimates, whose own error no model removes, and start from the smoother's first sample,
+        estimates, whose own error no model removes, and start from the smoother's first samples,
         its least accurate; so the error falls less than it would with measured states."""
         records = list(self.train) + (list(self.validate) if self.validate else [])
         est = [n for n, r in zip(self.train_names + (self.val_names if self.validate else []), records)
@@ -421,7 +421,7 @@ class Doctor:
             return []
         return [f"u, v, r of {len(est)} record(s) ({', '.join(est[:4])}{', ...' if len(est) > 4 else ''}) were "
                 "estimated from positions and heading: the replays are scored against those estimates, whose own "
-                "error no model removes, and each replay starts from the smoother's first estimate, its least "
+                "error no model removes, and each replay starts from the smoother's first estimates, its least "
                 "accurate; a named effect therefore lowers the error less than it would with measured velocities, "
                 "and a share below half says little about a cause no candidate models"]
 

@@ -49,7 +49,8 @@ import numpy as np
 from study.records import facility as fac
 from ..identify.effects import list_effects, registry
 from ..identify.with_effects import (CHANNELS, UNITS, EffectsProblem, Fit, identify_effects, record_errors,
-                                     validation_error)
+                                     scored_channels, validation_error)
+from ..identify.with_effects.initial_state import WINDOW_L_U
 from .decision import EXPLAINS_MOST, MIN_RECORDS_FOR_TEST, Evaluation, Options, decide, mean_on
 from .model_error import without_effects
 
@@ -138,14 +139,16 @@ class Doctor:
         errors, folds = {}, []
         if self.mode == "given":
             for name, df, info in zip(self.val_names, self.val_df, self.val_infos):
-                errors[name] = record_errors(df, self.predict(self.problem, fit, df, info), self.problem.floors)
+                errors[name] = record_errors(df, self.predict(self.problem, fit, df, info), self.problem.floors,
+                                             scored_channels(info.meta))
         else:
             for i, (name, df) in enumerate(zip(self.train_names, self.train_df)):
                 # warm start from the full fit
                 f = identify_effects(self.folds[i], effects, start=fit.outer, grid=False)
                 folds.append(f)
-                errors[name] = record_errors(df, self.predict(self.folds[i], f, df, self.problem.infos[i], i),
-                                             self.problem.floors)
+                info = self.problem.infos[i]
+                errors[name] = record_errors(df, self.predict(self.folds[i], f, df, info, i), self.problem.floors,
+                                             scored_channels(info.meta))
         ev = Evaluation(effects, fit, errors, validation_error(errors), fit.training_error,
                         time.perf_counter() - t0, folds)
         self.evaluations[key] = ev
@@ -411,19 +414,20 @@ class Doctor:
 
     def _estimated_states_notes(self) -> list:
         """What records whose u, v, r were estimated from positions and heading (the state
-        estimator, ``states=auto``) do to the verdict: their replays are scored against the
-        estimates, whose own error no model removes, and start from the smoother's first samples,
-        its least accurate; so the error falls less than it would with measured states."""
+        estimator, ``states=auto``) do to the verdict: their replays start from a state fitted to
+        the measured positions and heading (``with_effects.initial_state``) and are scored on the
+        estimates and the measured positions (``replay_errors.scored_channels``); the estimates'
+        own error is a floor no model removes."""
         records = list(self.train) + (list(self.validate) if self.validate else [])
         est = [n for n, r in zip(self.train_names + (self.val_names if self.validate else []), records)
                if (getattr(r, "meta", None) or {}).get("states") == "ekf"]
         if not est:
             return []
         return [f"u, v, r of {len(est)} record(s) ({', '.join(est[:4])}{', ...' if len(est) > 4 else ''}) were "
-                "estimated from positions and heading: the replays are scored against those estimates, whose own "
-                "error no model removes, and each replay starts from the smoother's first estimates, its least "
-                "accurate; a named effect therefore lowers the error less than it would with measured velocities, "
-                "and a share below half says little about a cause no candidate models"]
+                "estimated from positions and heading: each replay starts from the state that best fits the first "
+                f"{WINDOW_L_U:g} ship lengths of the measured positions and heading (not the smoother's first "
+                "estimates, its least accurate), and is scored on the estimated u, v, r, the heading and the measured "
+                "positions; the estimates' own error is a floor under the validation error that no model removes"]
 
     def _why_rejected(self, cand, scored: list, e_prev: float, e_new: float) -> str:
         """Why a ladder step, refined, fails the ranking's bar (diverged, not lower, or not lower
@@ -581,7 +585,8 @@ def _errors_rows(base: Evaluation, final: Evaluation) -> list:
     """Per validation record and channel, the baseline's and the final model's RMSE and NRMSE."""
     rows = []
     for rec in base.errors:
-        for c in CHANNELS + ("track",):
+        extra = tuple(c for c in base.errors[rec].get("scored", ()) if c not in CHANNELS)  # x0, y0 when scored
+        for c in CHANNELS + extra + ("track",):
             b, f = base.errors[rec][c], final.errors[rec][c]
             rows.append({"record": rec, "channel": c, "unit": UNITS[c],
                          "baseline_rmse": b["rmse"], "final_rmse": f["rmse"],

@@ -57,7 +57,8 @@ def kvlcc2_hsva(data_dir=None) -> dict:
     """The KVLCC2 case (see the module docstring): model -> effects -> residual table, errors,
     parameters."""
     from study.configuration.compose import read_config
-    from ..identify.with_effects import EffectsProblem, identify_effects, record_errors, validation_error
+    from ..identify.with_effects import (EffectsProblem, identify_effects, record_errors, scored_channels,
+                                         validation_error)
     from study.records.loaders import load_records, real_data_dir
 
     d = Path(data_dir) if data_dir else real_data_dir() / "kvlcc2_hsva" / "raw_data"
@@ -73,7 +74,7 @@ def kvlcc2_hsva(data_dir=None) -> dict:
         for effs in EFFECT_SETS:
             fit = identify_effects(pb, effs)
             errs = {r.meta["name"]: record_errors(r.data, pb.predict(fit, r.data, pb.info_for(r.data, r.meta)),
-                                                  pb.floors) for r in val}
+                                                  pb.floors, scored_channels(r.meta)) for r in val}
             desc = {k: v for k, v in pb.describe(fit, model=False).items() if isinstance(v, (int, float))}
             out.setdefault(label, {})["+".join(effs) or "none"] = {
                 "training_error": fit.training_error, "validation_error": validation_error(errs),

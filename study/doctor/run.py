@@ -81,7 +81,7 @@ def log_runs(conf: dict, doctor, rep: dict, train, validate) -> list:
                 for c, e in chans.items():
                     if isinstance(e, dict):
                         metrics[f"val_{rec}_nrmse_{c}"] = e["nrmse"]
-                    else:
+                    elif isinstance(e, (bool, int, float)):  # 'diverged' ('scored' names channels)
                         metrics[f"val_{rec}_{c}"] = float(e)
             return {"metrics": metrics, "params": params, "timings": {"fit": ev.seconds}}
 

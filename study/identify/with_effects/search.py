@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize
 
-from .replay_errors import record_errors, validation_error
+from .replay_errors import record_errors, scored_channels, validation_error
 
 
 @dataclass
@@ -117,7 +117,7 @@ class _Objectives:
         except (ValueError, np.linalg.LinAlgError):
             return 1e6
         f = Fit(self.effects, outer, coefs, 0.0)
-        errs = {i: record_errors(df, pb.predict(f, df, pb.infos[i]), pb.floors)
+        errs = {i: record_errors(df, pb.predict(f, df, pb.infos[i]), pb.floors, scored_channels(pb.infos[i].meta))
                 for i, df in enumerate(pb.records)}
         e = validation_error(errs)
         return e if np.isfinite(e) else 1e6

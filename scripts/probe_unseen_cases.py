@@ -86,6 +86,8 @@ def run(name: str) -> None:
         par = ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in r["parameters"].items())
         print(f"   {r['effect']:<20} validation error {r['validation_error']:.4f}"
               f"{' (significant)' if r['significant'] else ''}: {par}")
+    fin = rep["final"]["parameters"]
+    print("   final: " + ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in fin.items()))
     for s in rep["ladder"]:
         print(f"   ladder {s['step']:<22} validation {s['scored_error']:.4f}, training {s['training_error']:.4f}"
               f"{' REJECTED' if s.get('rejected') else ''}")

@@ -134,21 +134,23 @@ def test_identified_hull_wind_and_a_late_steering_gear_are_both_named():
     assert p["rudder_delay"] == pytest.approx(1.0, abs=0.25)
 
 
-@pytest.mark.slow  # 30-40 s: the published hull, four records through the state estimator
-def test_a_current_is_named_from_positions_and_heading_only():
+@pytest.mark.slow  # 15-30 s with the published hull, 2-3 min with an identified one: five records through the filter
+@pytest.mark.parametrize("identified", [False, True], ids=["known", "identified_hull"])
+def test_a_current_is_named_from_positions_and_heading_only(identified):
     """Records as a sea trial gives them: positions and heading only, with u, v, r estimated by the extended Kalman
-    filter and smoother, and the tests' relative noise (1 %: about 0.66 m on the positions of this 7 m model, a
-    tenth of its length, and 0.15 deg on the heading; far noisier than a basin's tracking). The current is named
-    and its speed and direction found; the error falls by less than with measured u, v, r (the replays are scored
-    on the estimated states, whose own error no model removes; the report says so), but by more than a third."""
+    filter and smoother, and the tests' relative noise (1 %: about 0.7 m on the positions of this 7 m model, a
+    tenth of its length, and 0.15-0.25 deg on the heading; far noisier than a basin's tracking). The current is named,
+    its speed and direction found, and the error falls by at least half (measured: 91 % with the published hull, 81 %
+    with the identified one; 53 % and 27 % when replays started from the smoother's first estimates and were scored
+    on u, v, r and psi alone). The report says the states were estimated; with measured ones it does not."""
     example = {**effect_config("current")["example"], "states": "estimated"}
-    d, rep, _ = run_case("current_estimated_states", example, False)
+    d, rep, _ = run_case("current_estimated_states", example, identified)
     assert rep["missing_effect"] == "current", rep["verdict"]
-    p = rep["ranking"][0]["parameters"]
+    p = rep["final"]["parameters"]
     assert p["current_speed"] == pytest.approx(0.12 * U0, rel=0.2)
     assert abs((p["current_direction_deg"] - 200.0 + 180.0) % 360.0 - 180.0) < 12.0
     ladder = [s for s in rep["ladder"] if not s.get("rejected")]
-    assert ladder[1]["scored_error"] < (2.0 / 3.0) * ladder[0]["scored_error"]
+    assert ladder[1]["scored_error"] <= 0.5 * ladder[0]["scored_error"]
     assert any("estimated from positions and heading" in n for n in rep["notes"]), rep["notes"]
     assert not any("estimated from positions" in n for n in run_case("current", effect_config("current")["example"],
                                                                      False)[1]["notes"])

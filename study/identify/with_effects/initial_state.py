@@ -4,13 +4,13 @@ A replay starts from the record's first state. With measured u, v, r that is a q
 first samples (``study.identify.output_error.initial_value``). With estimated ones it is not good
 enough: a Kalman smoother's estimate is least accurate at a record's ends, where only one side of the
 data informs it (measured on the 7 m KVLCC2 model with 1 % noise on the positions: the first v off by
-0.04 m/s and r by 0.003 rad/s, an error that takes about 5 s to decay and that no effect removes, so
-it dilutes every effect's share of the error).
+0.04 m/s and r by 0.003 rad/s; a replay of the true model from there has its heading off by 0.7 of
+the heading's spread, an error no effect removes, so it dilutes every effect's share of the error).
 
-Here the initial state is estimated by output error, as Ljung (1999, Sec. 7.3) treats unknown initial
-conditions: the six states (u, v through the water, r, x0, y0, psi) minimise the misfit of the replay
-to the MEASURED channels (x0, y0, psi, each over its noise standard deviation from the state
-estimator) over the record's first ``WINDOW_L_U`` ship lengths of travel -- long enough to average the
+Here the initial state is estimated as output-error identification treats unknown initial conditions
+(Ljung 1999, System Identification, 2nd ed.): the six states (u, v through the water, r, x0, y0,
+psi) minimise the misfit of the replay to the MEASURED channels (x0, y0, psi, each over its noise
+standard deviation from the state estimator) over the record's first ``WINDOW_L_U`` ship lengths of travel -- long enough to average the
 position noise, short enough that the model's own error, which is what the replay is to show, has
 little time to build up. The model replayed is the fitted one, so the start is consistent with it.
 """

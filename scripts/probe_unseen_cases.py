@@ -90,7 +90,7 @@ def run(name: str) -> None:
     print("   final: " + ", ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}" for k, v in fin.items()))
     for s in rep["ladder"]:
         print(f"   ladder {s['step']:<22} validation {s['scored_error']:.4f}, training {s['training_error']:.4f}"
-              f"{' REJECTED' if s.get('rejected') else ''}")
+              f"{' REJECTED: ' + str(s.get('reason')) if s.get('rejected') else ''}")
 
 
 if __name__ == "__main__":

@@ -10,9 +10,13 @@ the heading's spread, an error no effect removes, so it dilutes every effect's s
 Here the initial state is estimated as output-error identification treats unknown initial conditions
 (Ljung 1999, System Identification, 2nd ed.): the six states (u, v through the water, r, x0, y0,
 psi) minimise the misfit of the replay to the MEASURED channels (x0, y0, psi, each over its noise
-standard deviation from the state estimator) over the record's first ``WINDOW_L_U`` ship lengths of travel -- long enough to average the
-position noise, short enough that the model's own error, which is what the replay is to show, has
-little time to build up. The model replayed is the fitted one, so the start is consistent with it.
+standard deviation from the state estimator) over the record's first ``WINDOW_L_U`` ship lengths of travel -- short enough that the
+model's own error, which is what the replay is to show, has little time to build up -- or longer when
+the position noise needs it: a speed fitted to positions of noise sd sigma sampled every h over a
+window T is uncertain by sigma sqrt(12 h / T^3) (a straight line's slope), kept below
+``SPEED_PRECISION`` of the approach speed (on a 1.3 m AUV with 1.3 m of position noise three lengths
+are 2.7 s, which left u 25 % off; the noise asks for 21 s). The model replayed is the fitted one, so
+the start is consistent with it.
 """
 from __future__ import annotations
 
@@ -22,8 +26,10 @@ from scipy.optimize import least_squares
 from ...sim import replay
 
 #: The fitting window, in ship lengths travelled at the approach speed (L/U0 each: 6.7 s for the 7 m
-#: KVLCC2 model, 40 s for the ship); at least ``MIN_SAMPLES`` samples and at most a third of the record.
+#: KVLCC2 model, 40 s for the ship), longer when the position noise asks for it (``SPEED_PRECISION``); at
+#: least ``MIN_SAMPLES`` samples and at most a third of the record.
 WINDOW_L_U = 3.0
+SPEED_PRECISION = 0.01
 MIN_SAMPLES = 20
 MEASURED = ("x0", "y0", "psi")
 
@@ -33,12 +39,13 @@ def needs_fitted_start(meta: dict | None) -> bool:
     return (meta or {}).get("states") == "ekf"
 
 
-def noise_sd(meta: dict, data: dict, L: float) -> np.ndarray:
+def noise_sd(meta: dict, L: float) -> np.ndarray:
     """The measured channels' noise standard deviations: the state estimator's (recorded in the
-    record's metadata), else a floor of 1e-3 L and 0.1 deg (a differential GNSS and a gyro)."""
+    record's metadata); where it gives none, 1e-3 L and 0.1 deg (assumed: a differential GNSS or a
+    tank's tracking, and a gyro)."""
     sd = ((meta or {}).get("state_estimation") or {}).get("noise_std") or {}
-    floor = {"x0": 1e-3 * L, "y0": 1e-3 * L, "psi": np.radians(0.1)}
-    return np.array([max(float(sd.get(c) or 0.0), 1e-6 * floor[c]) or floor[c] for c in MEASURED])
+    default = {"x0": 1e-3 * L, "y0": 1e-3 * L, "psi": np.radians(0.1)}
+    return np.array([float(sd.get(c) or 0.0) if float(sd.get(c) or 0.0) > 0.0 else default[c] for c in MEASURED])
 
 
 def fitted_initial_state(vessel, tu: np.ndarray, data: dict, state0: list, meta: dict, L: float,
@@ -47,13 +54,15 @@ def fitted_initial_state(vessel, tu: np.ndarray, data: dict, state0: list, meta:
     (``data``: the record's channels on the uniform time base ``tu``); ``state0`` unchanged when
     the record is too short or the fit does not lower the misfit."""
     h = float(tu[1] - tu[0])
-    w = int(round(WINDOW_L_U * L / U0 / h)) + 1
+    sd = noise_sd(meta, L)
+    # sigma sqrt(12 h / T^3) <= SPEED_PRECISION U0, solved for T
+    t_noise = (max(sd[0], sd[1]) * np.sqrt(12.0 * h) / (SPEED_PRECISION * U0)) ** (2.0 / 3.0)
+    w = int(round(max(WINDOW_L_U * L / U0, t_noise) / h)) + 1
     w = min(max(w, MIN_SAMPLES), len(tu) // 3)
     if w < MIN_SAMPLES:
         return list(state0)
     t, delta, n = tu[:w], data["delta"][:w], data["n"][:w]
     meas = np.stack([data[c][:w] for c in MEASURED])  # (3, w)
-    sd = noise_sd(meta, data, L)
     scale = np.array([0.02 * U0, 0.02 * U0, 0.02 * U0 / L, sd[0], sd[1], sd[2]])
     x_ref = np.asarray(state0, float)
     P = np.asarray(vessel.params, float)

@@ -62,3 +62,12 @@ def test_measured_states_keep_their_own_start_and_channels(records):
     assert pred["v"].iloc[0] == pytest.approx(clean["v"].iloc[0], abs=1e-6)
     errs = record_errors(clean, pred, pb.floors, scored_channels(meta))
     assert errs["scored"] == ("u", "v", "r", "psi") and errs["x0"]["nrmse"] < 0.01
+
+
+def test_noise_levels_come_from_the_estimator_or_an_assumed_default():
+    from study.identify.with_effects.initial_state import noise_sd
+
+    meta = {"state_estimation": {"noise_std": {"x0": 0.5, "y0": 0.4, "psi": 0.002}}}
+    assert noise_sd(meta, 7.0) == pytest.approx([0.5, 0.4, 0.002])
+    assert noise_sd({}, 7.0) == pytest.approx([7e-3, 7e-3, np.radians(0.1)])
+    assert noise_sd({"state_estimation": {"noise_std": {"x0": 0.0}}}, 320.0)[0] == pytest.approx(0.32)

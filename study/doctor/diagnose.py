@@ -49,7 +49,7 @@ import numpy as np
 from study.records import facility as fac
 from ..identify.effects import list_effects, registry
 from ..identify.with_effects import (CHANNELS, UNITS, EffectsProblem, Fit, identify_effects, record_errors,
-                                     scored_channels, validation_error)
+                                     scored_channels, states_estimated, validation_error)
 from ..identify.with_effects.initial_state import WINDOW_L_U
 from .decision import EXPLAINS_MOST, MIN_RECORDS_FOR_TEST, Evaluation, Options, decide, mean_on
 from .model_error import without_effects
@@ -420,7 +420,7 @@ class Doctor:
         own error is a floor no model removes."""
         records = list(self.train) + (list(self.validate) if self.validate else [])
         est = [n for n, r in zip(self.train_names + (self.val_names if self.validate else []), records)
-               if (getattr(r, "meta", None) or {}).get("states") == "ekf"]
+               if states_estimated(getattr(r, "meta", None))]
         if not est:
             return []
         return [f"u, v, r of {len(est)} record(s) ({', '.join(est[:4])}{', ...' if len(est) > 4 else ''}) were "

@@ -42,7 +42,7 @@ def test_the_start_is_fitted_to_the_measured_positions_and_heading(records, monk
     fit = Fit((), {}, {}, 0.0)
     info = pb.info_for(est.data, est.meta, "zigzag")
     fitted = pb.predict(fit, est.data, info)
-    monkeypatch.setattr(problem_module, "needs_fitted_start", lambda meta: False)
+    monkeypatch.setattr(problem_module, "states_estimated", lambda meta: False)
     smoother = pb.predict(fit, est.data, info)
     truth = {c: clean[c].iloc[0] for c in ("u", "v", "r")}
     assert abs(fitted["v"].iloc[0] - truth["v"]) <= 0.01 * pb.U0

@@ -26,9 +26,9 @@ from .estimator import ModelWithEffects, VariableProjection, identify_effects
 from .inverse_dynamics import residuals
 from .problem import ENVELOPE, EQUATIONS, EffectsProblem, as_frame, record_h_T
 from .replay_errors import (CHANNELS, NRMSE_CAP, UNITS, diverged_records, record_error, record_errors,
-                            scored_channels, validation_error)
+                            scored_channels, states_estimated, validation_error)
 from .search import Fit
 
 __all__ = ["CHANNELS", "ENVELOPE", "EQUATIONS", "NRMSE_CAP", "UNITS", "EffectsProblem", "Fit", "ModelWithEffects",
            "VariableProjection", "as_frame", "diverged_records", "identify_effects", "record_error", "record_errors",
-           "record_h_T", "residuals", "scored_channels", "validation_error"]
+           "record_h_T", "residuals", "scored_channels", "states_estimated", "validation_error"]

@@ -32,17 +32,12 @@ from ...sim import replay
 #: least ``MIN_SAMPLES`` samples and at most a third of the record.
 WINDOW_L_U = 3.0
 SPEED_PRECISION = 0.01
+MIN_SAMPLES = 20
 #: The prior's standard deviation about the record's first estimate, in units of 2 % of the speed (u, v), 2 % of
 #: U0/L (r) and the noise sd (x0, y0, psi): 5 % of the speed, wider than the smoother's first error on the
 #: tests' noisiest records (3.4 %), so that the positions decide wherever they can.
 PRIOR_WIDTH = 2.5
-MIN_SAMPLES = 20
 MEASURED = ("x0", "y0", "psi")
-
-
-def needs_fitted_start(meta: dict | None) -> bool:
-    """True for a record whose u, v, r came from the state estimator (``meta['states'] == 'ekf'``)."""
-    return (meta or {}).get("states") == "ekf"
 
 
 def noise_sd(meta: dict, L: float) -> np.ndarray:
@@ -51,7 +46,8 @@ def noise_sd(meta: dict, L: float) -> np.ndarray:
     tank's tracking, and a gyro)."""
     sd = ((meta or {}).get("state_estimation") or {}).get("noise_std") or {}
     default = {"x0": 1e-3 * L, "y0": 1e-3 * L, "psi": np.radians(0.1)}
-    return np.array([float(sd.get(c) or 0.0) if float(sd.get(c) or 0.0) > 0.0 else default[c] for c in MEASURED])
+    given = {c: float(sd.get(c) or 0.0) for c in MEASURED}
+    return np.array([given[c] if given[c] > 0.0 else default[c] for c in MEASURED])
 
 
 def fitted_initial_state(vessel, tu: np.ndarray, data: dict, state0: list, meta: dict, L: float,

@@ -11,7 +11,8 @@ import pandas as pd
 from scipy import linalg
 
 from . import uncertainty
-from .initial_state import fitted_initial_state, needs_fitted_start
+from .initial_state import fitted_initial_state
+from .replay_errors import states_estimated
 from .search import Fit
 from ..output_error import initial_value
 from ..regression import kind_regressors
@@ -413,7 +414,7 @@ class EffectsProblem:
         for e in fit.effects:
             self.effect(e).initial_state(self, values, x0)
         state0 = [x0["u"], x0["v"], x0["r"], x0["x0"], x0["y0"], x0["psi"]]
-        if needs_fitted_start(info.meta):  # estimated u, v, r: the smoother's first estimates are its worst
+        if states_estimated(info.meta):  # estimated u, v, r: the smoother's first estimates are its worst
             state0 = fitted_initial_state(v, tu, data, state0, info.meta, self.L, self.U0)
         with np.errstate(all="ignore"):
             out = replay(v, tu, data["delta"], data["n"], state0)[:, :, 0]

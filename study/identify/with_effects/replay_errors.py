@@ -26,10 +26,17 @@ UNITS = {"u": "m/s", "v": "m/s", "r": "rad/s", "psi": "rad", "x0": "m", "y0": "m
 NRMSE_CAP = 10.0
 
 
+def states_estimated(meta: dict | None) -> bool:
+    """True for a record whose u, v, r came from the state estimator (``meta['states'] == 'ekf'``:
+    ``study.records.schema``): its replay starts from a fitted state (``initial_state``) and is
+    scored on ``ESTIMATED_STATES_SCORED``."""
+    return (meta or {}).get("states") == "ekf"
+
+
 def scored_channels(meta: dict | None) -> tuple:
     """The channels a record's error is the mean NRMSE of: ``ESTIMATED_STATES_SCORED`` when its u,
-    v, r were estimated (``meta['states'] == 'ekf'``), else ``CHANNELS``."""
-    return ESTIMATED_STATES_SCORED if (meta or {}).get("states") == "ekf" else CHANNELS
+    v, r were estimated (:func:`states_estimated`), else ``CHANNELS``."""
+    return ESTIMATED_STATES_SCORED if states_estimated(meta) else CHANNELS
 
 
 def record_errors(meas: pd.DataFrame, pred: pd.DataFrame | None, floors: dict | None = None,

@@ -7,8 +7,9 @@ the verdict.
 2. **Candidates**: each effect of the catalogue (``conf/effect``, plus the user's) not in the model
    is added, the model re-identified on the training records, and replayed through the validation
    records. Its *improvement* is the relative fall of the validation error (the mean over records of
-   the mean NRMSE of u, v, r, psi; NRMSE: RMSE over the measured channel's standard deviation, or a
-   floor of 2 % of U0, of U0/L and 0.02 rad when the channel hardly varies).
+   the mean NRMSE of u, v, r, psi, and of x0, y0 on a record whose u, v, r were estimated; NRMSE: RMSE
+   over the measured channel's standard deviation, or a floor of 2 % of U0, of U0/L and 0.02 rad when
+   the channel hardly varies).
 3. **Significance** (parsimony): a candidate is significant when the validation error falls by at
    least ``min_improvement`` (default 10 %) -- out-of-sample, so an effect that only fits noise
    earns nothing -- and, with three validation records or more, the per-record errors fall

@@ -210,7 +210,7 @@ def _figures(doctor, rep: dict, meas: dict, pb: dict, pf: dict) -> tuple:
     rej = any(s.get("rejected") for s in rep["ladder"])
     div = any(s.get("diverged") for s in rep["ladder"])
     add("ladder.png", plots.ladder(rep["ladder"]), "The error ladder", "Validation error (mean NRMSE of u, v, r, "
-        "psi over the validation records) of the baseline and of each step with an effect added" +
+        "psi, and x0, y0 where u, v, r were estimated, over the validation records) of the baseline and of each step with an effect added" +
         ("; a rejected step (its error not lower by 10 %) is hatched" if rej else "") +
         ("; a diverged replay is marked, with no bar" if div else "") + ".", "ladder")
     return figs, listing, windows
@@ -282,9 +282,11 @@ DEFINITIONS = {
     "NRMSE": "root-mean-square error of a replayed channel over the standard deviation of the measured channel "
              "(or a floor when it hardly varies: 2 % of U0 for u and v, 2 % of U0/L for r, 0.02 rad for psi); at "
              "most 10",
-    "validation error": "the mean NRMSE of u, v, r and psi, averaged over the validation records (held-out "
-                        "records when none are given), the model replayed open loop from each record's initial "
-                        "state with its measured rudder and propeller; lower is better; a diverged replay has none",
+    "validation error": "the mean NRMSE of u, v, r and psi (and of the positions x0, y0 on a record whose u, v, r "
+                        "were estimated from them), averaged over the validation records (held-out records when "
+                        "none are given), the model replayed open loop from each record's initial state (fitted to "
+                        "the positions and heading when u, v, r were estimated) with its measured rudder and "
+                        "propeller; lower is better; a diverged replay has none",
     "training error": "the equation-error misfit on the training records: per equation (X, Y, N) the residual sum "
                       "of squares over that of the model-free rows, averaged over the equations",
     "improvement": "the relative fall of the validation error when a candidate effect is added (out of sample)",

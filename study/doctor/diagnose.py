@@ -27,6 +27,8 @@ the verdict.
    is rejected: the ladder stops and says why. So is a step after the first that is named in half
    or fewer of the leave-one-out repetitions of step 4 (the first is reported with its count
    whatever it is: it explains the baseline's error; a further step explains what is left of it).
+   A step takes a pair of candidates at once when no single one explains the records
+   (:mod:`study.doctor.pairs`: two effects acting together, which a third can stand in for).
 6. **The place** (``study.records.facility``): a candidate that needs what the training records'
    facility lacks (wind indoors, a current in still water) is not tried; a fitted candidate that is
    physically implausible there (a pond's current faster than the wind's drift) is rejected with the
@@ -52,8 +54,10 @@ from ..identify.effects import list_effects, registry
 from ..identify.with_effects import (CHANNELS, UNITS, EffectsProblem, Fit, identify_effects, record_errors,
                                      scored_channels, states_estimated, validation_error)
 from ..identify.with_effects.initial_state import WINDOW_L_U
-from .decision import EXPLAINS_MOST, MIN_RECORDS_FOR_TEST, Evaluation, Options, decide, mean_on
+from .decision import MIN_RECORDS_FOR_TEST, Evaluation, Options, decide, mean_on
 from .model_error import without_effects
+from .pairs import better_pair
+from .verdict import verdict_line
 
 
 def _names(records) -> list:
@@ -306,7 +310,7 @@ class Doctor:
         ladder = [self._ladder_row("baseline", base, scored)]
         ladder_fits = [base.fit]
         notes = self._opening_notes(base, scored)
-        first_ranking, missing, ambiguous, stab, first_evs = None, None, [], [], {}
+        first_ranking, missing, ambiguous, stab, first_evs, named_first = None, None, [], [], {}, []
         diverged = {"baseline": base.diverged}
         current = base  # the ladder's step as reported (outer parameters refined on the replay error)
         ranking_base = base if not self.given else self.evaluate(tuple(self.given))  # its equation-error twin
@@ -318,6 +322,18 @@ class Doctor:
                 first_ranking, first_evs = ranking, evs
             if not scored:
                 break
+            pair = better_pair(self, ranking_base, ranking, evs, m, scored)
+            if pair is not None and (taken := self._pair_step(pair, ranking_base, current, scored, step, notes)):
+                cand, st = taken
+                stab.append(st)
+                ladder.append(self._ladder_row(f"+ {' + '.join(pair['pair'])}", cand, scored))
+                if step == 0:
+                    missing, named_first = pair["pair"][0], list(pair["pair"])
+                ranking_base = self.evaluations[(cand.effects, False, False)]
+                current = cand
+                diverged[ladder[-1]["step"]] = cand.diverged
+                ladder_fits.append(cand.fit)
+                continue
             st = self.stability(ranking_base, evs, m, amb, scored)
             st["step"] = step + 1
             if amb:
@@ -352,7 +368,7 @@ class Doctor:
                 break
             stab.append(st)
             if step == 0:
-                missing = m
+                missing, named_first = m, [m]
                 best = next(r for r in ranking if r["effect"] == m)
                 best["parameters"] = self.problem.describe(cand.fit, [m], model=False)  # the refined estimates
             ranking_base = self.evaluations[(key, False, False)]
@@ -365,6 +381,7 @@ class Doctor:
         if separating is not None:
             notes.append(separating["text"])
         self.result = {"base": base, "final": current, "ranking": first_ranking or [], "missing": missing,
+                       "named_first": named_first,
                        "ambiguous": ambiguous, "ladder": ladder, "notes": notes, "stability": stab,
                        "separating": separating,
                        "pair_evaluations": {e: first_evs[e] for e in (separating or {}).get("pair", [])},
@@ -372,6 +389,26 @@ class Doctor:
                        "diverged": diverged, "scored": scored, "ladder_fits": ladder_fits,
                        "seconds": time.perf_counter() - t0}
         return self.result
+
+    def _pair_step(self, pair: dict, base: Evaluation, current: Evaluation, scored: list, step: int,
+                   notes: list):
+        """The ladder step of a pair (:mod:`study.doctor.pairs`): refined on the training replays, taken
+        when it passes the step's bar (at least ``min_improvement`` below the step before); returns
+        (its evaluation, its stability entry) and appends its ladder row and note, or None."""
+        a, b = pair["pair"]
+        cand = self.evaluate(base.effects + (a, b), start=base.fit.outer, refine=True)
+        e_prev, e_new = mean_on(current, scored), mean_on(cand, scored)
+        alone = ", ".join(f"{e} alone {pair['singles'][e]:.3g}" for e in (a, b))
+        if not e_new <= e_prev * (1.0 - self.opt.min_improvement):
+            notes.append(f"the pair {a} + {b} ({alone}; together {mean_on(pair['evaluation'], scored):.3g}) was tried "
+                         f"and rejected: with its parameters refined it {self._why_rejected(cand, scored, e_prev, e_new)}")
+            return None
+        text = (f"{a} + {b}: named together in {pair['k']} of {pair['n']} (each validation record left out in turn)"
+                if pair["n"] >= 2 else f"{a} + {b}: not assessable with {pair['n']} validation record")
+        notes.append(f"{a} and {b} named together: neither alone explains the records ({alone}; the step's best "
+                     f"single candidate, {pair['best_single']}: {pair['best_error']:.3g}), together {e_new:.3g}")
+        return cand, {"k": pair["k"] if pair["n"] >= 2 else None, "n": pair["n"], "text": text, "step": step + 1,
+                      "pair": [a, b]}
 
     def _tie_note(self, ranking: list, amb: list) -> str:
         """The note on two candidates the data cannot tell apart; each of their ranking rows says so."""
@@ -500,13 +537,14 @@ class Doctor:
         for c in implausible:
             notes.append(f"candidate {c['effect']} rejected as physically implausible here: {c['implausible']}")
         return {
-            "verdict": self._verdict(),
+            "verdict": verdict_line(self),
             "baseline": {"validation_error": base.validation_error, "training_error": base.training_error,
                          "effects": list(base.effects), "parameters": self.problem.describe(base.fit),
                          "errors": base.errors, "diverged": base.diverged},
             "ranking": [{k: v for k, v in c.items() if k != "seconds"} for c in r["ranking"]],
             "not_applicable": self.not_applicable,
             "missing_effect": m,
+            "missing_effects": list(r["named_first"]),
             "ambiguous": r["ambiguous"],
             "ladder": r["ladder"],
             "stability": r["stability"],
@@ -530,56 +568,6 @@ class Doctor:
             "depths_h_T": {i.name: i.h_T for i in self.problem.infos + self.val_infos},
             "seconds": r["seconds"],
         }
-
-    def _verdict(self) -> str:
-        """The report's one line: the missing effect with its fall of the error and its
-        parameters, a tie, a rejected best candidate or nothing significant; a diverged baseline
-        said first."""
-        r = self.result
-        base, m = r["base"], r["missing"]
-        stab = {s["step"]: s for s in r["stability"]}
-        scored = r["scored"]
-        prefix = ""
-        if base.diverged:
-            prefix = (f"Diverged: the baseline model diverges when replayed through {len(base.diverged)} of "
-                      f"{len(base.errors)} validation record(s) ({', '.join(base.diverged)}); " +
-                      ("those are not scored. " if scored else "no record is left to compare on, so no missing "
-                       "effect can be named"))
-        if not scored:
-            verdict = prefix
-        elif m:
-            e0, e1 = r["ladder"][0]["scored_error"], r["ladder"][1]["scored_error"]
-            pars = list(self.problem.describe(r["ladder_fits"][1], [m], model=False).items())
-            fmt = lambda v: f"{v:.4g}" if isinstance(v, (int, float)) else str(v)  # noqa: E731
-            on = f" on the other {len(scored)} record(s)" if base.diverged else ""
-            verdict = prefix + (f"Missing effect: {m} (validation error{on} {e0:.3g} -> {e1:.3g}, "
-                                f"{100 * (1 - e1 / e0):.0f} % lower; " +
-                                ", ".join(f"{k} = {fmt(v)}" for k, v in pars[:6]) +
-                                (", ..." if len(pars) > 6 else "") + ")")
-            if base.diverged:
-                still = [x for x in base.diverged if x in r["ladder"][1]["diverged"]]
-                verdict += (f"; with it {', '.join(still)} still diverge(s)" if still else
-                            f"; with it the replay of {', '.join(base.diverged)} is stable")
-            if 1 in stab and stab[1]["k"] is not None:
-                verdict += f"; named in {stab[1]['k']} of {stab[1]['n']} with one validation record left out"
-            if e1 > (1.0 - EXPLAINS_MOST) * e0:
-                verdict += (f"; it removes less than {100 * EXPLAINS_MOST:.0f} % of the error: it may stand in for a "
-                            "cause no candidate models")
-            acc = [s for s in r["ladder"][2:] if not s.get("rejected")]
-            if acc:
-                verdict += "; then " + ", ".join(s["step"][2:] for s in acc)
-        elif r["ambiguous"]:
-            verdict = prefix + (f"The data cannot tell {r['ambiguous'][0]} from {r['ambiguous'][1]} apart; both "
-                                "lower the validation error about equally")
-        elif len(r["ladder"]) > 1 and r["ladder"][1].get("rejected"):
-            st = r["ladder"][1]
-            verdict = prefix + (f"No missing effect named: the best candidate, {st['step'][2:]}, was rejected "
-                                f"({st['reason']})")
-        else:
-            verdict = prefix + "No significant missing effect"
-            if 1 in stab and stab[1]["k"] is not None:
-                verdict += f" (the same in {stab[1]['k']} of {stab[1]['n']} with one validation record left out)"
-        return verdict
 
 
 def _errors_rows(base: Evaluation, final: Evaluation) -> list:

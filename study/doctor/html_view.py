@@ -73,7 +73,12 @@ def verdict(r: Report) -> dict:
             p = cand["p_value"]
             if p is not None and not math.isnan(p):
                 bits.append(f"p {fmt_p(p)}" if p < 1e-3 else f"p = {fmt_p(p)}")
-        v.update(kind="found", cls="verdict found", missing=missing, bits=bits,
+        together = [e for e in (r.missing_effects or []) if e != missing]
+        if together:  # a pair named at once: the fall is the pair's, the ladder's first step
+            e0, e1 = (finite(r.ladder[i].get("scored_error")) for i in (0, 1))
+            bits = [f"validation error down by {fmt_pct(1 - e1 / e0)} together"] if e0 and e1 is not None else []
+        v.update(kind="found", cls="verdict found", missing=" + ".join([missing, *together]), together=bool(together),
+                 bits=bits,
                  inseparable=[a for a in ambiguous if a != missing])
     elif ambiguous:
         v.update(kind="ambiguous", cls="verdict ambiguous", ambiguous=ambiguous)

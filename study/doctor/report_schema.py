@@ -227,6 +227,7 @@ class Report:
     ranking: list[RankingRow]  # the candidates of the first step, best first
     not_applicable: dict[str, str] | None = None  # effect -> why it was not tried here
     missing_effect: str | None  # the effect named; None when none is (or two cannot be told apart)
+    missing_effects: list[str] | None = None  # the first step's effects: the one named, or a pair named together
     ambiguous: list[str]  # the two candidates the data cannot tell apart, else empty
     ladder: list[LadderStep]  # the baseline, then each effect added in turn
     stability: list[StabilityEntry] | None = None  # each step's verdict with one validation record left out

@@ -109,6 +109,26 @@ def test_identified_hull_two_hidden_effects_are_found_one_after_the_other():
     assert p["yaw_bias_N"] == pytest.approx(-7.0e-4, rel=0.3)
 
 
+@pytest.mark.slow  # 140 s: the identified hull, two effects for which a third stands in
+def test_identified_hull_two_effects_a_third_stands_in_for_are_named_together():
+    """A current (8 % of the speed towards 120 deg) and a yaw bias (N' 5e-4) together: a wind ranks first alone
+    (its drift and yaw moment mimic both; validation error 0.613 -> 0.254, the current alone 0.317), and the greedy
+    ladder named the wind (32 % lower, refined) and stopped. The pair the wind stands in for is named at once:
+    measured 0.613 -> 0.049 (-92 %), the current 0.095 m/s towards 121 deg, N' 6e-4."""
+    example = {"environment": [{"name": "current", "speed_U0": 0.08, "direction_deg": 120.0},
+                               {"name": "yaw_bias", "Y": 0.0, "N": 5.0e-4}]}
+    _, rep, _ = run_case("stand_in", example, True)
+    assert sorted(rep["missing_effects"]) == ["current", "yaw_bias"], rep["verdict"]
+    assert "Missing effects: current and yaw_bias, together" in rep["verdict"]
+    ladder = [s for s in rep["ladder"] if not s.get("rejected")]
+    assert set(ladder[1]["effects"]) == {"current", "yaw_bias"} and "wind" not in rep["final"]["effects"]
+    assert ladder[1]["scored_error"] <= 0.5 * ladder[0]["scored_error"]
+    p = rep["final"]["parameters"]
+    assert p["current_speed"] == pytest.approx(0.08 * U0, rel=0.2)
+    assert abs((p["current_direction_deg"] - 120.0 + 180.0) % 360.0 - 180.0) < 12.0
+    assert p["yaw_bias_N"] == pytest.approx(5.0e-4, rel=0.3)
+
+
 @pytest.mark.slow  # two identified-hull doctor runs, 60-90 s each
 @pytest.mark.parametrize("identified", [False, True], ids=["known", "identified_hull"])
 def test_a_late_steering_gear_is_told_from_a_slow_one(identified):

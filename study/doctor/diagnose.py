@@ -21,7 +21,8 @@ the verdict.
    repeated with each validation record left out and reported as "named in k of n"; a named effect
    that removes less than half of the validation error (``decision.EXPLAINS_MOST``) is said to
    explain it in part: it may stand in for a cause no candidate models.
-5. **Ladder**: the missing effect is added (its parameters refined on the training replays), the
+5. **Ladder**: the missing effect is added (its parameters refined on the training replays; the
+   step keeps its ranking fit if refining raised the validation error by more than ``tie``), the
    remaining candidates ranked again on top of it, and so on while a significant one remains. A step
    whose validation error, refined, is not at least ``min_improvement`` lower than the step before
    is rejected: the ladder stops and says why. So is a step after the first that is named in half
@@ -323,59 +324,50 @@ class Doctor:
             if not scored:
                 break
             pair = better_pair(self, ranking_base, ranking, evs, m, scored)
-            if pair is not None and (taken := self._pair_step(pair, ranking_base, current, scored, step, notes)):
-                cand, st = taken
-                stab.append(st)
-                ladder.append(self._ladder_row(f"+ {' + '.join(pair['pair'])}", cand, scored))
-                if step == 0:
-                    missing, named_first = pair["pair"][0], list(pair["pair"])
-                ranking_base = self.evaluations[(cand.effects, False, False)]
-                current = cand
-                diverged[ladder[-1]["step"]] = cand.diverged
-                ladder_fits.append(cand.fit)
-                continue
-            st = self.stability(ranking_base, evs, m, amb, scored)
-            st["step"] = step + 1
-            if amb:
-                if step == 0:
-                    ambiguous = amb
-                stab.append(st)
-                notes.append(self._tie_note(ranking, amb))
-                break
-            if m is None:
-                if step == 0:
+            taken = self._pair_step(pair, ranking_base, current, scored, step, notes) if pair else None
+            if taken is None:
+                st = self.stability(ranking_base, evs, m, amb, scored)
+                st["step"] = step + 1
+                if amb or m is None:  # a tie, or nothing significant: the ladder stops
+                    ambiguous = amb if step == 0 else ambiguous
+                    if amb or step == 0:
+                        stab.append(st)
+                    if amb:
+                        notes.append(self._tie_note(ranking, amb))
+                    break
+                if step > 0 and st.get("k") is not None and 2 * st["k"] <= st["n"]:
+                    # a further effect explains what is left after a named one, a small error: it must not hang on
+                    # which validation record is scored. The row shows its ranking fit (not refined: it is not taken)
+                    why = (f"is named in only {st['k']} of {st['n']} with one validation record left out in turn: "
+                           "the records do not settle a further effect")
+                    ladder.append(self._ladder_row(f"+ {m}", evs[m], scored, rejected=True, reason=why))
+                    notes.append(f"ladder step + {m} rejected: it {why}; the ladder stops at the step before")
                     stab.append(st)
-                break
-            if step > 0 and st.get("k") is not None and 2 * st["k"] <= st["n"]:
-                # a further effect explains what is left after a named one, a small error: it must not hang on
-                # which validation record is scored. The row shows its ranking fit (not refined: it is not taken)
-                why = (f"is named in only {st['k']} of {st['n']} with one validation record left out in turn: the "
-                       "records do not settle a further effect")
-                ladder.append(self._ladder_row(f"+ {m}", evs[m], scored, rejected=True, reason=why))
-                notes.append(f"ladder step + {m} rejected: it {why}; the ladder stops at the step before")
-                stab.append(st)
-                break
-            key = self.key(ranking_base.effects + (m,))
-            cand = self.evaluate(key, start=ranking_base.fit.outer, refine=True)
-            e_prev, e_new = mean_on(current, scored), mean_on(cand, scored)
-            # the step as refined must pass the ranking's own bar: lower, by at least min_improvement
-            if not e_new <= e_prev * (1.0 - self.opt.min_improvement):
-                why = self._why_rejected(cand, scored, e_prev, e_new)
-                ladder.append(self._ladder_row(f"+ {m}", cand, scored, rejected=True, reason=why))
-                notes.append(f"ladder step + {m} rejected: with its parameters refined on the training replays it "
-                             f"{why}; the ladder stops at the step before")
-                diverged[f"+ {m}"] = cand.diverged
-                break
+                    break
+                cand = self.evaluate(ranking_base.effects + (m,), start=ranking_base.fit.outer, refine=True)
+                e_prev, e_new = mean_on(current, scored), mean_on(cand, scored)
+                # the step as refined must pass the ranking's own bar: lower, by at least min_improvement
+                if not e_new <= e_prev * (1.0 - self.opt.min_improvement):
+                    why = self._why_rejected(cand, scored, e_prev, e_new)
+                    ladder.append(self._ladder_row(f"+ {m}", cand, scored, rejected=True, reason=why))
+                    notes.append(f"ladder step + {m} rejected: with its parameters refined on the training replays "
+                                 f"it {why}; the ladder stops at the step before")
+                    diverged[f"+ {m}"] = cand.diverged
+                    break
+                cand = self.kept(evs[m], cand, scored, notes)
+                if step == 0:  # the ranking shows the estimates of the effect it names as the step keeps them
+                    next(r for r in ranking if r["effect"] == m)["parameters"] = self.problem.describe(
+                        cand.fit, [m], model=False)
+                taken = [m], cand, st
+            names, current, st = taken
             stab.append(st)
             if step == 0:
-                missing, named_first = m, [m]
-                best = next(r for r in ranking if r["effect"] == m)
-                best["parameters"] = self.problem.describe(cand.fit, [m], model=False)  # the refined estimates
-            ranking_base = self.evaluations[(key, False, False)]
-            current = cand
-            diverged[f"+ {m}"] = cand.diverged
-            ladder.append(self._ladder_row(f"+ {m}", cand, scored))
-            ladder_fits.append(cand.fit)
+                missing, named_first = names[0], names
+            ranking_base = self.evaluations[(current.effects, False, False)]
+            label = "+ " + " + ".join(names)
+            diverged[label] = current.diverged
+            ladder.append(self._ladder_row(label, current, scored))
+            ladder_fits.append(current.fit)
         self._closing_notes(notes, missing, ambiguous, scored)
         separating = self.separating(first_ranking or [], first_evs, missing, ambiguous, stab)
         if separating is not None:
@@ -390,11 +382,25 @@ class Doctor:
                        "seconds": time.perf_counter() - t0}
         return self.result
 
+    def kept(self, ranked: Evaluation, refined: Evaluation, scored: list, notes: list) -> Evaluation:
+        """The fit a taken step keeps: ``refined`` (its outer parameters polished on the training
+        replays; the step passed the bar with it) -- unless its validation error is more than ``tie``
+        above that of ``ranked``, the equation-error fit the ranking compared: then refining overfitted
+        the training replays (small manoeuvres that say little about larger ones), the ranked fit is
+        kept and a note says so."""
+        e_ranked, e_refined = mean_on(ranked, scored), mean_on(refined, scored)
+        if not e_refined > (1.0 + self.opt.tie) * e_ranked:
+            return refined
+        notes.append(f"the step {', '.join(refined.effects)}: refined on the training replays its validation error is "
+                     f"{e_refined:.3g} against {e_ranked:.3g} as ranked, more than {100 * self.opt.tie:.0f} % higher: "
+                     "the fit that ranked it is kept (refining overfitted the training records)")
+        return ranked
+
     def _pair_step(self, pair: dict, base: Evaluation, current: Evaluation, scored: list, step: int,
                    notes: list):
         """The ladder step of a pair (:mod:`study.doctor.pairs`): refined on the training replays, taken
         when it passes the step's bar (at least ``min_improvement`` below the step before); returns
-        (its evaluation, its stability entry) and appends its ladder row and note, or None."""
+        (its two effects, its evaluation, its stability entry) and appends its note, or None."""
         a, b = pair["pair"]
         cand = self.evaluate(base.effects + (a, b), start=base.fit.outer, refine=True)
         e_prev, e_new = mean_on(current, scored), mean_on(cand, scored)
@@ -405,10 +411,13 @@ class Doctor:
             return None
         text = (f"{a} + {b}: named together in {pair['k']} of {pair['n']} (each validation record left out in turn)"
                 if pair["n"] >= 2 else f"{a} + {b}: not assessable with {pair['n']} validation record")
-        notes.append(f"{a} and {b} named together: neither alone explains the records ({alone}; the step's best "
-                     f"single candidate, {pair['best_single']}: {pair['best_error']:.3g}), together {e_new:.3g}")
-        return cand, {"k": pair["k"] if pair["n"] >= 2 else None, "n": pair["n"], "text": text, "step": step + 1,
-                      "pair": [a, b]}
+        notes.append(f"{a} and {b} named together: neither alone explains the records (validation errors as ranked: "
+                     f"{alone}, the step's best single candidate {pair['best_single']} {pair['best_error']:.3g}, "
+                     f"together {mean_on(pair['evaluation'], scored):.3g}; with the pair's parameters refined on the "
+                     f"training replays, the ladder's step, {e_new:.3g})")
+        return [a, b], self.kept(pair["evaluation"], cand, scored, notes), {
+            "k": pair["k"] if pair["n"] >= 2 else None, "n": pair["n"], "text": text,
+            "step": step + 1, "pair": [a, b]}
 
     def _tie_note(self, ranking: list, amb: list) -> str:
         """The note on two candidates the data cannot tell apart; each of their ranking rows says so."""

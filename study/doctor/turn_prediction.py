@@ -69,10 +69,11 @@ CASES = (
 
 
 #: the doctor's verdict on these records with the hull identified (``python -m study doctor_examples``, the
-#: case ``kvlcc2_hsva_identified``): a tie between the rudder's inflow and a yaw bias, whose cases these are
-TIE = ("+ yaw bias (a set-up effect, left out of the turn)",
-       "+ rudder inflow (gamma_R to either side, l_R, epsilon free)")
-TIE_LABEL = "the doctor's verdict, a tie: the yaw bias (left out) and rudder inflow rows weighted equally"
+#: case ``kvlcc2_hsva_identified``): the rudder's inflow and a yaw bias named together, whose case this is (the yaw
+#: bias, HSVA's set-up, left out of a turn for another basin). Two or more cases: a tie, their equal mixture
+VERDICT = ("+ yaw bias + rudder inflow",)
+VERDICT_LABEL = ("the doctor's verdict: the rudder's inflow and a yaw bias together (the yaw bias, a set-up effect, "
+                 "left out)")
 
 
 def _case_alternatives(cases: list, k: int, tie: float = 0.1) -> list:
@@ -140,7 +141,7 @@ def kvlcc2_hsva_table(data_dir=None, draws: int = 64) -> pd.DataFrame:
                         f"distance_{key}": got["extrapolation"]["distance"]})
         rows.append(row)
         details[label] = side
-    rows.append(tie_row(details))
+    rows.append(verdict_row(details))
     df = pd.DataFrame(rows)
     for key in ("stbd", "port"):
         df[f"TD_{key}_vs_published_pct"] = 100.0 * (df[f"TD_L_{key}"] / df.loc[0, f"TD_L_{key}"] - 1.0)
@@ -148,17 +149,19 @@ def kvlcc2_hsva_table(data_dir=None, draws: int = 64) -> pd.DataFrame:
     return df
 
 
-def tie_row(details: dict) -> dict:
-    """The row of the doctor's tie (:data:`TIE`): per side the equal mixture of the tied readings'
-    tactical-diameter intervals (``prediction_interval.tie_mixture``)."""
+def verdict_row(details: dict) -> dict:
+    """The row of the doctor's verdict (:data:`VERDICT`): its case's tactical diameters, or for a
+    tie, per side the equal mixture of the tied readings' intervals
+    (``prediction_interval.tie_mixture``)."""
     from .prediction_interval import tie_mixture
 
-    row = {"model": TIE_LABEL, "setup_left_out": "yaw_bias (in its reading)"}
+    row = {"model": VERDICT_LABEL, "setup_left_out": "yaw_bias"}
     for key in ("stbd", "port"):
-        tds = [details[label][key]["metrics"]["tactical_diameter_L"] for label in TIE]
-        mix = tie_mixture([(td["value"], td["low"], td["high"]) for td in tds])
+        tds = [details[label][key]["metrics"]["tactical_diameter_L"] for label in VERDICT]
+        mix = tie_mixture([(td["value"], td["low"], td["high"]) for td in tds]) if len(tds) > 1 else {
+            "value": tds[0]["value"], "low": tds[0]["low"], "high": tds[0]["high"]}
         row.update({f"TD_L_{key}": mix["value"], f"TD_L_{key}_low": mix["low"], f"TD_L_{key}_high": mix["high"],
-                    f"distance_{key}": max(details[label][key]["extrapolation"]["distance"] for label in TIE)})
+                    f"distance_{key}": max(details[label][key]["extrapolation"]["distance"] for label in VERDICT)})
     return row
 
 
@@ -211,9 +214,9 @@ def write_table(df: pd.DataFrame, out: Path, draws: int = 64) -> list[Path]:
         "distance outside their envelope (study/doctor/predictions.py, METHOD). An effect of HSVA's test set-up "
         "(the yaw bias: HSVA's report says its rudder was deflected from the geometric zero) is left out of a turn "
         "predicted for another basin unless kept (keep_setup_effects). The last row is the doctor's answer for "
-        "another basin: with the hull identified it cannot tell a yaw bias (HSVA's set-up, left out) from the "
-        "rudder's inflow on these records, so the turn is the equal mixture of the two readings' intervals, its "
-        "median as the value (study/doctor/prediction_interval.py, tie_mixture).\n\n"
+        "another basin: with the hull identified it names the rudder's inflow and a yaw bias together on these "
+        "records (neither alone explains them: study/doctor/pairs.py), and the yaw bias, HSVA's set-up, is left "
+        "out of the turn.\n\n"
         + show.to_markdown(index=False, floatfmt=".3g") + "\n\n"
         f"## Where the doctor's default hull ({default}) predicts the turn, and what carries it\n\n"
         + "\n".join(lines) + "\n")

@@ -335,6 +335,33 @@ def test_a_ladder_step_that_raises_the_error_is_rejected(monkeypatch):
     assert any("rejected" in n for n in rep["notes"]) and "current, was rejected" in rep["verdict"]
 
 
+@pytest.mark.parametrize("refined, kept", [(0.7, 0.4), (0.43, 0.43)])
+def test_a_step_whose_refinement_overfits_keeps_the_fit_that_ranked_it(monkeypatch, refined, kept):
+    """current ranks at 0.4 of the baseline's error; refined on the training replays it is at 0.7 (still below the
+    bar, so the step is taken) -- 75 % above its ranking fit: the step keeps the ranking fit and says why. Refined
+    within the tie (0.43), the refined fit is kept, as always."""
+    train, val = records([], duration=60.0)
+    d = Doctor(VESSEL, KNOWN, train, val, Options(candidates=("current", "yaw_bias"), checks="off"))
+    real = Doctor.evaluate
+    factor = {("current", False): 0.4, ("current", True): refined, ("yaw_bias", False): 0.97,
+              ("yaw_bias", True): 0.97}
+
+    def fake_evaluate(self, effects, start=None, fixed=(), refine=False):
+        ev = real(self, (), start, fixed, False)
+        if not effects:
+            return ev
+        out = scaled(ev, effects, 0.97 if len(effects) > 1 else factor[(effects[-1], refine)])
+        self.evaluations[(self.key(effects), bool(fixed), refine)] = out
+        return out
+
+    monkeypatch.setattr(Doctor, "evaluate", fake_evaluate)
+    d.run()
+    rep = d.report()
+    assert rep["missing_effect"] == "current"
+    assert rep["ladder"][1]["scored_error"] == pytest.approx(kept * rep["ladder"][0]["scored_error"])
+    assert any("the fit that ranked it is kept" in n for n in rep["notes"]) == (kept != refined)
+
+
 def test_a_further_step_that_hangs_on_one_validation_record_is_rejected(monkeypatch):
     """current is named (both validation records' errors fall by 60 %); on top of it yaw_bias lowers the mean
     error by a quarter, but all of it on one record: with either record left out it is named once in two, so the

@@ -46,7 +46,7 @@ def better_pair(doctor, base: Evaluation, ranking: list, evs: dict, named, score
     hold ``named`` are fitted; the best one is taken when it passes :func:`pair_beats` on the scored
     records, and still does in more than half of the repetitions with one validation record left
     out (as a step after the first must: a pair is two steps at once). Returns ``{'pair', 'evaluation',
-    'singles', 'k', 'n'}``."""
+    'singles'`` (each member's validation error alone), ``'best_single', 'best_error', 'k', 'n'}``."""
     top = pool(ranking, evs)
     if len(top) < 2 or not scored:
         return None

@@ -16,7 +16,7 @@ from itertools import combinations
 
 import numpy as np
 
-from .decision import Evaluation, Options, compare
+from .decision import Evaluation, Options, compare, mean_on
 
 #: the step's best candidates whose pairs are tried (3: three more fits a step; a setting)
 POOL = 3
@@ -58,13 +58,15 @@ def better_pair(doctor, base: Evaluation, ranking: list, evs: dict, named, score
         fits[(a, b)] = doctor.evaluate(base.effects + (a, b), start=base.fit.outer)
     if not fits:
         return None
-    (a, b), ev = min(fits.items(), key=lambda kv: float(np.mean(kv[1].per_record(scored))))
+    (a, b), ev = min(fits.items(), key=lambda kv: mean_on(kv[1], scored))
     members = [evs[a], evs[b]]
     if not pair_beats(ev, members, best, base, doctor.opt, scored):
         return None
     n = len(scored)
-    k = sum(pair_beats(ev, members, best, base, doctor.opt, [x for x in scored if x != r]) for r in scored) if n >= 2 else 0
+    # leave-one-out needs two records at least
+    k = sum(pair_beats(ev, members, best, base, doctor.opt, [x for x in scored if x != r])
+            for r in scored) if n >= 2 else 0
     if n >= 2 and 2 * k <= n:
         return None
-    return {"pair": [a, b], "evaluation": ev, "singles": {e: float(np.mean(evs[e].per_record(scored))) for e in (a, b)},
-            "best_single": top[0], "best_error": float(np.mean(best.per_record(scored))), "k": int(k), "n": n}
+    return {"pair": [a, b], "evaluation": ev, "singles": {e: mean_on(evs[e], scored) for e in (a, b)},
+            "best_single": top[0], "best_error": mean_on(best, scored), "k": int(k), "n": n}
